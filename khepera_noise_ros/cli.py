@@ -1,0 +1,58 @@
+"""The ``khepera-noise`` command: one subcommand per module in ``commands/``.
+
+Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and
+``run(args) -> int``.  Errors a user can fix (``UsageError``, ``ValueError``,
+``FileNotFoundError``) are printed as one line and exit with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import sys
+
+from . import __version__, commands
+
+
+class UsageError(Exception):
+    """A mistake in the command line or its inputs, reported without a traceback."""
+
+
+def loopback_only() -> None:
+    """Keep DDS discovery on this machine unless the user already chose otherwise."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='khepera-noise',
+        description='Evolve Khepera light-centring controllers under Meeden (1998) sensor '
+                    'noise models, test them on the robot, and diagnose the sim-to-real gap.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f'{commands.__name__}.{info.name}')
+        name = getattr(module, 'NAME', info.name)
+        p = sub.add_parser(name, help=module.HELP, description=module.__doc__,
+                           formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        module.add_arguments(p)
+        p.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv=None) -> int:
+    loopback_only()
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except (UsageError, ValueError, FileNotFoundError) as exc:
+        print(f'khepera-noise {args.command}: error: {exc}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f'khepera-noise {args.command}: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``khepera-noise``; each module is found and added automatically."""

@@ -1,0 +1,1 @@
+"""The paper's model as pure numpy: no ROS, no files, no command line."""

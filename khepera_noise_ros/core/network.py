@@ -1,0 +1,83 @@
+"""The paper's 6-2-2 feed-forward controller and its genome of 20 genes.
+
+Genome layout (the order the appendix lists them):
+  genes[0:12]   input-to-hidden weights, gene 2*i + j joins input i to hidden j
+  genes[12:16]  hidden-to-output weights, gene 12 + 2*j + k joins hidden j to output k
+  genes[16:18]  hidden biases
+  genes[18:20]  output biases
+Units are logistic.  Output 0 < 0.5 turns left (-1), else right (+1); output 1
+gives the power trunc(10 * out), at most 9.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import expit
+
+from .khepera import DARK, FRONT
+
+INPUTS, HIDDEN, OUTPUTS = FRONT, 2, 2
+GENES = INPUTS * HIDDEN + HIDDEN * OUTPUTS + HIDDEN + OUTPUTS   # 20
+LEFT, RIGHT = -1, 1
+
+
+@dataclass(frozen=True)
+class Weights:
+    """A batch of networks, robot index last so each sum runs over contiguous arrays."""
+
+    w_ih: np.ndarray   # (INPUTS, HIDDEN, B)
+    w_ho: np.ndarray   # (HIDDEN, OUTPUTS, B)
+    b_h: np.ndarray    # (HIDDEN, B)
+    b_o: np.ndarray    # (OUTPUTS, B)
+
+
+def check_genomes(genomes) -> np.ndarray:
+    """Genomes as a finite (B, 20) float array, or a ValueError naming the problem."""
+    g = np.asarray(genomes, dtype=np.float64)
+    if g.ndim == 1:
+        g = g[None, :]
+    if g.ndim != 2 or g.shape[1] != GENES:
+        raise ValueError(f'a genome has {GENES} genes; got an array of shape '
+                         f'{np.shape(genomes)}')
+    if not np.isfinite(g).all():
+        bad = np.argwhere(~np.isfinite(g))[0]
+        raise ValueError(f'genome {bad[0]} gene {bad[1]} is {g[tuple(bad)]}; genes must be finite')
+    return g
+
+
+def unpack(genomes) -> Weights:
+    g = check_genomes(genomes).astype(np.float32).T          # (20, B)
+    n_ih = INPUTS * HIDDEN
+    n_ho = HIDDEN * OUTPUTS
+    return Weights(
+        w_ih=np.ascontiguousarray(g[:n_ih].reshape(INPUTS, HIDDEN, -1)),
+        w_ho=np.ascontiguousarray(g[n_ih:n_ih + n_ho].reshape(HIDDEN, OUTPUTS, -1)),
+        b_h=np.ascontiguousarray(g[n_ih + n_ho:n_ih + n_ho + HIDDEN]),
+        b_o=np.ascontiguousarray(g[n_ih + n_ho + HIDDEN:]))
+
+
+def pack(w: Weights) -> np.ndarray:
+    """Inverse of unpack: (B, 20) genomes."""
+    b = w.b_o.shape[-1]
+    return np.concatenate([w.w_ih.reshape(-1, b), w.w_ho.reshape(-1, b), w.b_h, w.b_o]).T
+
+
+def inputs(readings: np.ndarray) -> np.ndarray:
+    """The paper's input(n) = 1 - sensor(n)/525 for the front six sensors."""
+    return 1.0 - readings[:FRONT] * np.float32(1.0 / DARK)
+
+
+def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
+    """(OUTPUTS, B) activations for (SENSORS or FRONT, B) readings."""
+    x = inputs(readings)
+    hidden = expit(np.einsum('ib,ijb->jb', x, w.w_ih) + w.b_h)
+    return expit(np.einsum('jb,jkb->kb', hidden, w.w_ho) + w.b_o)
+
+
+def act(w: Weights, readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Turn commands (direction -1/+1, power 0..9) as int arrays of shape (B,)."""
+    out = outputs(w, readings)
+    direction = np.where(out[0] < 0.5, LEFT, RIGHT).astype(np.int32)
+    power = np.minimum((out[1] * 10).astype(np.int32), 9)
+    return direction, power

@@ -1,0 +1,149 @@
+"""The paper's sensor noise: getnoise, the independent and combination models.
+
+``getnoise(v, p)`` returns an integer in [-p*v, p*v] as the paper's C code
+does (truncation toward zero).  The combination model adds one shared
+*dependent* draw per dependence group, scaled by the group's average base
+value, to an *independent* draw per sensor:
+
+    dnoise = getnoise(groupavg, d%)
+    s(n)   = base(n) + dnoise + getnoise(base(n), i%)
+
+Draws arrive as 16-bit integers (see ``streams``) so that a uniform and a
+normal model consume the same randomness.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import ndtri
+
+from .khepera import DARK, SENSORS
+from .streams import UNIT
+
+MODELS = ('none', 'independent', 'combination')
+DISTRIBUTIONS = ('uniform', 'normal')
+DEFAULT_GROUPS = ((0, 1, 2, 3, 4, 5), (6, 7))
+_SQRT3 = np.float32(np.sqrt(3.0))
+
+
+def getnoise(v, p, u) -> np.ndarray:
+    """The paper's getnoise: ``(int)(2*p*v*realrand() - p*v)`` for draws u in [0, 1]."""
+    return np.trunc(2.0 * p * np.asarray(v) * u - p * np.asarray(v))
+
+
+def realrand(draws: np.ndarray) -> np.ndarray:
+    """16-bit draws to reals in [0, 1] inclusive, like the paper's realrand()."""
+    return draws.astype(np.float32) * np.float32(1.0 / UNIT)
+
+
+def gaussian(draws: np.ndarray) -> np.ndarray:
+    """16-bit draws to standard normal deviates (inverse CDF at bin centres)."""
+    return ndtri((draws.astype(np.float64) + 0.5) / (UNIT + 1.0)).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Which noise, how much of each part, over which dependence groups.
+
+    Levels are fractions (0.05 is the paper's 5%).  The independent model uses
+    only ``independent``; ``dependent`` and ``groups`` matter only to the
+    combination model.  With ``distribution='normal'`` a part of level p has
+    standard deviation p*v/sqrt(3), the same spread as the uniform part.
+    """
+
+    model: str = 'combination'
+    dependent: float = 0.03
+    independent: float = 0.02
+    groups: tuple = field(default=DEFAULT_GROUPS)
+    distribution: str = 'uniform'
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise ValueError(f'noise model must be one of {MODELS}, got {self.model!r}')
+        if self.distribution not in DISTRIBUTIONS:
+            raise ValueError(f'distribution must be one of {DISTRIBUTIONS}, '
+                             f'got {self.distribution!r}')
+        for name in ('dependent', 'independent'):
+            level = getattr(self, name)
+            if not isinstance(level, (int, float, np.floating)) or not np.isfinite(level) \
+                    or not 0.0 <= level <= 1.0:
+                raise ValueError(f'{name} noise level must be a finite fraction in [0, 1], '
+                                 f'got {level!r}')
+        object.__setattr__(self, 'groups', check_groups(self.groups))
+
+    @classmethod
+    def independent_only(cls, level: float, **kw) -> 'NoiseModel':
+        return cls(model='independent', dependent=0.0, independent=level, **kw)
+
+    @property
+    def levels(self) -> tuple[float, float]:
+        """(dependent, independent) fractions actually applied."""
+        if self.model == 'none':
+            return 0.0, 0.0
+        if self.model == 'independent':
+            return 0.0, self.independent
+        return self.dependent, self.independent
+
+    def apply(self, base: np.ndarray, sensor_draws: np.ndarray,
+              group_draws: np.ndarray) -> np.ndarray:
+        """Noisy readings, clipped to 0..525.
+
+        base: (SENSORS, B); sensor_draws: (SENSORS, B) uint16;
+        group_draws: (>= len(groups), B) uint16, one row per group.
+        """
+        d, i = self.levels
+        out = base.copy()
+        if i > 0:
+            out += self._part(base, i, sensor_draws)
+        if d > 0:
+            for g, members in enumerate(_indexers(self.groups)):
+                avg = base[members].mean(axis=0)
+                out[members] += self._part(avg, d, group_draws[g])
+        return np.clip(out, 0.0, DARK, out=out)
+
+    def _part(self, v: np.ndarray, p: float, draws: np.ndarray) -> np.ndarray:
+        if self.distribution == 'uniform':
+            return getnoise(v, np.float32(p), realrand(draws))
+        return np.trunc(np.float32(p) * v * gaussian(draws) / _SQRT3)
+
+    def sample(self, base, rng: np.random.Generator, samples: int = 1) -> np.ndarray:
+        """(samples, len(base)) readings for fixed base values, drawn from ``rng``."""
+        base = np.asarray(base, dtype=np.float32)
+        if any(max(g) >= base.size for g in self.groups):
+            raise ValueError(f'dependence groups {self.groups} name sensors beyond the '
+                             f'{base.size} base values given')
+        grid = np.repeat(base[:, None], samples, axis=1)
+        draws = rng.integers(0, int(UNIT) + 1, size=(base.size + len(self.groups), samples),
+                             dtype=np.uint16)
+        return self.apply(grid, draws[:base.size], draws[base.size:]).T
+
+
+def check_groups(groups) -> tuple:
+    """Validate dependence groups: disjoint, non-empty, sensor indices 0..7."""
+    try:
+        groups = tuple(tuple(int(s) for s in g) for g in groups)
+    except (TypeError, ValueError):
+        raise ValueError(f'dependence groups must be lists of sensor indices, got {groups!r}')
+    seen: set[int] = set()
+    for g in groups:
+        if not g:
+            raise ValueError(f'dependence groups must not be empty, got {groups!r}')
+        bad = [s for s in g if not 0 <= s < SENSORS]
+        if bad:
+            raise ValueError(f'dependence group {list(g)} names sensors {bad}; '
+                             f'sensors are 0..{SENSORS - 1}')
+        overlap = seen.intersection(g)
+        if overlap or len(set(g)) != len(g):
+            raise ValueError(f'dependence groups must not overlap: sensor(s) '
+                             f'{sorted(overlap) or list(g)} appear twice in {groups!r}')
+        seen.update(g)
+    if len(groups) > SENSORS:
+        raise ValueError(f'at most {SENSORS} dependence groups, got {len(groups)}')
+    return groups
+
+
+def _indexers(groups: tuple) -> list:
+    """A slice for each run of adjacent sensors (cheap), else an index list."""
+    return [slice(g[0], g[-1] + 1) if list(g) == list(range(g[0], g[-1] + 1)) else list(g)
+            for g in groups]

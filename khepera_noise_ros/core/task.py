@@ -1,0 +1,150 @@
+"""The light-centring episode of section 4.2, vectorised over a batch of robots.
+
+A robot at a fixed position turns to face a lamp.  Every ``perturb_every``
+steps (step 0 included) its heading is knocked by a uniform random angle.  At
+each step it reads its sensors, the controller answers with a turn, and the
+step scores balance x intensity x turning on the front six readings.  The
+episode's fitness is the mean over its steps.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import streams
+from .khepera import DARK, World, to_degrees, to_tenths, turn
+from .noise import NoiseModel, realrand
+
+Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Task:
+    steps: int = 60
+    perturb_every: int = 5
+    perturbation_deg: float = 30.0
+
+    def __post_init__(self):
+        for name, low in (('steps', 1), ('perturb_every', 1)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < low:
+                raise ValueError(f'{name} must be an integer >= {low}, got {value!r}')
+        if not np.isfinite(self.perturbation_deg) or not 0 <= self.perturbation_deg <= 180:
+            raise ValueError(f'perturbation_deg must be in [0, 180], got '
+                             f'{self.perturbation_deg!r}')
+
+
+def fitness_factors(readings: np.ndarray, power: np.ndarray):
+    """(balance, intensity, turning), each (B,), from (>=6, B) readings and (B,) power."""
+    left = (readings[0] + readings[1] + readings[2]) * np.float32(1 / 3)
+    right = (readings[3] + readings[4] + readings[5]) * np.float32(1 / 3)
+    balance = 1.0 - np.abs(left - right) * np.float32(1 / DARK)
+    intensity = 1.0 - (readings[2] + readings[3]) * np.float32(0.5 / DARK)
+    turning = (np.asarray(power) != 0).astype(np.float32)
+    return balance, intensity, turning
+
+
+def step_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
+    balance, intensity, turning = fitness_factors(readings, power)
+    return balance * intensity * turning
+
+
+class Episodes:
+    """A batch of episodes, stepped one control step at a time (Gymnasium-like).
+
+    ``world`` and ``noise`` may be replaced between steps; a change takes
+    effect at the next reading.  Randomness comes from ``streams``: an int
+    seed draws for the whole batch, a sequence gives each robot its own.
+    """
+
+    def __init__(self, world: World = World(), noise: NoiseModel = NoiseModel(),
+                 task: Task = Task()):
+        self.task = task
+        self.noise = noise
+        self.world = world
+        self.step_index = 0
+        self.readings: np.ndarray | None = None
+
+    @property
+    def world(self) -> World:
+        return self._world
+
+    @world.setter
+    def world(self, world: World) -> None:
+        self._world = world
+        self._table = world.light_table()
+
+    @property
+    def robots(self) -> int:
+        return self._bearing.size
+
+    @property
+    def done(self) -> bool:
+        return self.step_index >= self.task.steps
+
+    @property
+    def bearing_deg(self) -> np.ndarray:
+        """Lamp bearing in the robot frame, degrees, CCW positive, in [-180, 180)."""
+        return to_degrees(self._bearing)
+
+    def reset(self, seed, robots: int | None = None, bearing_deg=None) -> np.ndarray:
+        """Start B episodes; returns the first (SENSORS, B) readings."""
+        robots = robots if robots is not None else np.size(seed)
+        self._stream = streams.make_stream(seed, robots)
+        start = np.zeros(robots) if bearing_deg is None else np.broadcast_to(bearing_deg, robots)
+        self._bearing = to_tenths(start)
+        self.step_index = 0
+        self.readings = self._sense()
+        return self.readings
+
+    def step(self, direction, power) -> np.ndarray | None:
+        """Apply one turn per robot; returns the next readings, or None when done."""
+        if self.done:
+            raise RuntimeError('the episode is over; call reset()')
+        self._bearing = turn(self._bearing, np.asarray(direction, np.int32),
+                             np.asarray(power, np.int32), self.world)
+        self.step_index += 1
+        self.readings = None if self.done else self._sense()
+        return self.readings
+
+    def _sense(self) -> np.ndarray:
+        draws = self._stream.draw(self.step_index)
+        if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
+            knock = (2 * realrand(draws[streams.PERTURB]) - 1) * self.task.perturbation_deg
+            self._bearing = (self._bearing + to_tenths(knock)) % self._table.shape[1]
+        base = np.take(self._table, self._bearing, axis=1)
+        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP])
+
+
+@dataclass
+class Trace:
+    """Per-step record of a batch of episodes; arrays are (steps, B, ...)."""
+
+    bearing_deg: np.ndarray
+    readings: np.ndarray
+    direction: np.ndarray
+    power: np.ndarray
+    fitness: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.fitness = step_fitness(np.moveaxis(self.readings, 2, 0), self.power)
+
+
+def run(policy: Policy, seed, robots: int | None = None, world: World = World(),
+        noise: NoiseModel = NoiseModel(), task: Task = Task(), trace: bool = False):
+    """Run B episodes under ``policy``; returns fitness (B,) or a Trace."""
+    env = Episodes(world, noise, task)
+    readings = env.reset(seed, robots)
+    total = np.zeros(env.robots, np.float32)
+    rows = [] if trace else None
+    while readings is not None:
+        direction, power = policy(readings)
+        total += step_fitness(readings, power)
+        if trace:
+            rows.append((env.bearing_deg, readings.T.copy(), direction, power))
+        readings = env.step(direction, power)
+    if trace:
+        return Trace(*(np.stack(col) for col in zip(*rows)))
+    return total / task.steps

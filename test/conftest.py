@@ -1,0 +1,29 @@
+"""Suite-wide set-up: DDS stays on loopback, and each test run gets its own domain."""
+import itertools
+import os
+
+# Must be set before rclpy loads: Fast DDS otherwise multicasts off this machine.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 200))
+
+import pytest  # noqa: E402
+
+_domains = itertools.count()
+
+
+def next_domain_id() -> int:
+    """A domain for one test: distinct within this run, and from concurrent runs."""
+    return (int(os.environ['ROS_DOMAIN_ID']) + next(_domains)) % 200 + 1
+
+
+@pytest.fixture
+def ros_context():
+    """A fresh rclpy Context on its own domain, always shut down."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
