@@ -1,6 +1,6 @@
 """The ``khepera-noise`` command: one subcommand per module in ``commands/``.
 
-Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and
+Each command module (names starting with ``_`` are shared helpers) defines ``HELP`` (one line), ``add_arguments(parser)`` and
 ``run(args) -> int``.  Errors a user can fix (``UsageError``, ``ValueError``,
 ``FileNotFoundError``) are printed as one line and exit with status 2.
 """
@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        if info.name.startswith('_'):
+            continue
         module = importlib.import_module(f'{commands.__name__}.{info.name}')
         name = getattr(module, 'NAME', info.name)
         p = sub.add_parser(name, help=module.HELP, description=module.__doc__,

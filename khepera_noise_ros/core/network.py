@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import expit
 
 from .khepera import DARK, FRONT
 
@@ -68,16 +67,32 @@ def inputs(readings: np.ndarray) -> np.ndarray:
     return 1.0 - readings[:FRONT] * np.float32(1.0 / DARK)
 
 
+def _logistic(z: np.ndarray) -> np.ndarray:
+    """In-place logistic; exp overflow for very negative z correctly gives 0."""
+    with np.errstate(over='ignore'):
+        np.exp(np.negative(z, out=z), out=z)
+    z += 1
+    return np.reciprocal(z, out=z)
+
+
 def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
     """(OUTPUTS, B) activations for (SENSORS or FRONT, B) readings."""
-    x = inputs(readings)
-    hidden = expit(np.einsum('ib,ijb->jb', x, w.w_ih) + w.b_h)
-    return expit(np.einsum('jb,jkb->kb', hidden, w.w_ho) + w.b_o)
+    return _logistic(_output_net(w, readings))
+
+
+def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
+    hidden = np.einsum('ib,ijb->jb', inputs(readings), w.w_ih)
+    hidden += w.b_h
+    net = np.einsum('jb,jkb->kb', _logistic(hidden), w.w_ho)
+    net += w.b_o
+    return net
 
 
 def act(w: Weights, readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Turn commands (direction -1/+1, power 0..9) as int arrays of shape (B,)."""
-    out = outputs(w, readings)
-    direction = np.where(out[0] < 0.5, LEFT, RIGHT).astype(np.int32)
-    power = np.minimum((out[1] * 10).astype(np.int32), 9)
-    return direction, power
+    net = _output_net(w, readings)
+    # logistic(net) < 0.5 exactly when net < 0: the direction needs no exp
+    direction = np.where(net[0] < 0, LEFT, RIGHT).astype(np.int32)
+    power = _logistic(net[1])
+    power *= 10
+    return direction, np.minimum(power.astype(np.int32), 9)

@@ -98,14 +98,22 @@ class NoiseModel:
             out += self._part(base, i, sensor_draws)
         if d > 0:
             for g, members in enumerate(_indexers(self.groups)):
-                avg = base[members].mean(axis=0)
+                avg = base[members].sum(axis=0)
+                avg *= np.float32(1.0 / len(self.groups[g]))
                 out[members] += self._part(avg, d, group_draws[g])
         return np.clip(out, 0.0, DARK, out=out)
 
     def _part(self, v: np.ndarray, p: float, draws: np.ndarray) -> np.ndarray:
+        """getnoise(v, p) for every element, computed in place in float32."""
+        x = draws.astype(np.float32)
         if self.distribution == 'uniform':
-            return getnoise(v, np.float32(p), realrand(draws))
-        return np.trunc(np.float32(p) * v * gaussian(draws) / _SQRT3)
+            x *= np.float32(2.0 * p / UNIT)     # 2*p*realrand() ...
+            x -= np.float32(p)                  # ... - p, then times v: 2*p*v*u - p*v
+        else:
+            x = gaussian(draws)
+            x *= np.float32(p) / _SQRT3
+        x *= v
+        return np.trunc(x, out=x)
 
     def sample(self, base, rng: np.random.Generator, samples: int = 1) -> np.ndarray:
         """(samples, len(base)) readings for fixed base values, drawn from ``rng``."""
@@ -147,3 +155,17 @@ def _indexers(groups: tuple) -> list:
     """A slice for each run of adjacent sensors (cheap), else an index list."""
     return [slice(g[0], g[-1] + 1) if list(g) == list(range(g[0], g[-1] + 1)) else list(g)
             for g in groups]
+
+
+def parse_groups(text: str) -> tuple:
+    """'0,1,2;3,4,5' -> ((0, 1, 2), (3, 4, 5)); the empty string means no groups."""
+    try:
+        groups = [[int(s) for s in g.split(',')] for g in text.split(';') if g.strip()]
+    except ValueError:
+        raise ValueError(f"dependence groups must look like '0,1,2;3,4,5' (sensor indices, "
+                         f"',' within a group, ';' between groups), got {text!r}")
+    return check_groups(groups)
+
+
+def format_groups(groups) -> str:
+    return ';'.join(','.join(str(s) for s in g) for g in groups)

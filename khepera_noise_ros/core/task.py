@@ -110,7 +110,7 @@ class Episodes:
         return self.readings
 
     def _sense(self) -> np.ndarray:
-        draws = self._stream.draw(self.step_index)
+        draws = self._stream.draw(self.step_index, streams.GROUP.start + len(self.noise.groups))
         if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
             knock = (2 * realrand(draws[streams.PERTURB]) - 1) * self.task.perturbation_deg
             self._bearing = (self._bearing + to_tenths(knock)) % self._table.shape[1]
