@@ -34,13 +34,25 @@ def build_parser() -> argparse.ArgumentParser:
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         if info.name.startswith('_'):
             continue
-        module = importlib.import_module(f'{commands.__name__}.{info.name}')
+        try:
+            module = importlib.import_module(f'{commands.__name__}.{info.name}')
+        except ImportError as exc:
+            # one command missing an optional dependency must not take down the others
+            p = sub.add_parser(info.name, help=f'(unavailable: {exc})')
+            p.set_defaults(run=_unavailable(info.name, exc))
+            continue
         name = getattr(module, 'NAME', info.name)
         p = sub.add_parser(name, help=module.HELP, description=module.__doc__,
                            formatter_class=argparse.ArgumentDefaultsHelpFormatter)
         module.add_arguments(p)
         p.set_defaults(run=module.run)
     return parser
+
+
+def _unavailable(name: str, exc: ImportError):
+    def run(args):
+        raise UsageError(f'the {name} command cannot load: {exc}')
+    return run
 
 
 def main(argv=None) -> int:
