@@ -109,3 +109,13 @@ def test_streams_are_uniform_enough():
     assert abs(d.mean() - 0.5) < 0.01 and abs(d.var() - 1 / 12) < 0.005
     b = streams.BatchStream(1, 2000).draw(0).astype(np.float64) / streams.UNIT
     assert abs(b.mean() - 0.5) < 0.01
+
+
+def test_in_place_apply_equals_copying_apply():
+    rng = np.random.default_rng(9)
+    base = np.rint(rng.uniform(60, 500, (8, 300))).astype(np.float32)
+    draws = rng.integers(0, 65536, (8, 300), dtype=np.uint16)
+    model = NoiseModel('combination', 0.1, 0.1)
+    expected = model.apply(base, draws, draws[::-1])
+    aliased = base.copy()
+    assert np.array_equal(model.apply(aliased, draws, draws[::-1], out=aliased), expected)

@@ -86,21 +86,26 @@ class NoiseModel:
         return self.dependent, self.independent
 
     def apply(self, base: np.ndarray, sensor_draws: np.ndarray,
-              group_draws: np.ndarray) -> np.ndarray:
+              group_draws: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Noisy readings, clipped to 0..525.
 
         base: (SENSORS, B); sensor_draws: (SENSORS, B) uint16;
         group_draws: (>= len(groups), B) uint16, one row per group.
+        ``out=base`` overwrites the base values instead of copying them.
         """
         d, i = self.levels
-        out = base.copy()
-        if i > 0:
-            out += self._part(base, i, sensor_draws)
-        if d > 0:
+        shared = []
+        if d > 0:   # group averages come from the base values, before any noise
             for g, members in enumerate(_indexers(self.groups)):
                 avg = base[members].sum(axis=0)
                 avg *= np.float32(1.0 / len(self.groups[g]))
-                out[members] += self._part(avg, d, group_draws[g])
+                shared.append((members, self._part(avg, d, group_draws[g])))
+        independent = self._part(base, i, sensor_draws) if i > 0 else None
+        out = base.copy() if out is None else out
+        if independent is not None:
+            out += independent
+        for members, dnoise in shared:
+            out[members] += dnoise
         return np.clip(out, 0.0, DARK, out=out)
 
     def _part(self, v: np.ndarray, p: float, draws: np.ndarray) -> np.ndarray:

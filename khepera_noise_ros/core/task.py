@@ -115,7 +115,7 @@ class Episodes:
             knock = (2 * realrand(draws[streams.PERTURB]) - 1) * self.task.perturbation_deg
             self._bearing = (self._bearing + to_tenths(knock)) % self._table.shape[1]
         base = np.take(self._table, self._bearing, axis=1)
-        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP])
+        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
 
 
 @dataclass
