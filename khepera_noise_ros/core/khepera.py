@@ -85,5 +85,12 @@ def to_degrees(tenths: np.ndarray) -> np.ndarray:
 
 def turn(tenths: np.ndarray, direction: np.ndarray, power: np.ndarray,
          world: World) -> np.ndarray:
-    """New lamp bearing after a turn: right (+1) moves the lamp to the left (+)."""
-    return (tenths + direction * power * world.tenths_per_power) % TENTHS
+    """New lamp bearing after a turn: right (+1) moves the lamp to the left (+).
+
+    The grid index is left unwrapped (``% TENTHS`` or ``to_degrees`` wrap it), so
+    that callers wrap once per step rather than once per turn.
+    """
+    step = direction * power
+    step *= world.tenths_per_power
+    step += tenths
+    return step

@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from . import streams
-from .khepera import DARK, World, to_degrees, to_tenths, turn
+from .khepera import DARK, TENTHS, World, to_degrees, to_tenths, turn
 from .noise import NoiseModel, realrand
 
 Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -113,8 +113,10 @@ class Episodes:
         draws = self._stream.draw(self.step_index, streams.GROUP.start + len(self.noise.groups))
         if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
             knock = (2 * realrand(draws[streams.PERTURB]) - 1) * self.task.perturbation_deg
-            self._bearing = (self._bearing + to_tenths(knock)) % self._table.shape[1]
-        base = np.take(self._table, self._bearing, axis=1)
+            self._bearing = self._bearing + to_tenths(knock)
+        self._bearing %= TENTHS
+        # indices are in range after the modulo; 'clip' skips the bounds check of 'raise'
+        base = np.take(self._table, self._bearing, axis=1, mode='clip')
         return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
 
 
