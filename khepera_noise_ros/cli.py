@@ -1,8 +1,9 @@
 """The ``khepera-noise`` command: one subcommand per module in ``commands/``.
 
-Each command module (names starting with ``_`` are shared helpers) defines ``HELP`` (one line), ``add_arguments(parser)`` and
-``run(args) -> int``.  Errors a user can fix (``UsageError``, ``ValueError``,
-``FileNotFoundError``) are printed as one line and exit with status 2.
+Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and
+``run(args) -> int``; modules whose names start with ``_`` are shared helpers.
+Errors a user can fix (``UsageError``, ``ValueError``, ``FileNotFoundError``)
+are printed as one line and exit with status 2.
 """
 from __future__ import annotations
 
@@ -66,6 +67,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f'khepera-noise {args.command}: interrupted', file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # `khepera-noise ... | head`: the reader left; stop quietly like other CLI tools
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == '__main__':

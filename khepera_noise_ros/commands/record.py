@@ -1,0 +1,502 @@
+"""Record a robot node's light readings as CSV + YAML and as a rosbag2 (MCAP) bag.
+
+The recorder is the controller of one robot node on the lockstep topics: it
+starts each episode, answers every reading, and keeps each (episode, step)
+exactly once.  A resent reading is answered again but kept once; steps that
+never come are reported and listed in the manifest as lost_steps.  The
+stationary protocol is the paper's section 2: one episode of N samples per
+condition and heading, always answered with power 0.  The closed-loop protocol
+lets a genome's network drive the robot for N episodes of the task.  The robot
+node is started in this process (--robot) or is already running (--attach).
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import yaml
+
+from ..core import network
+from ..core.khepera import SENSORS
+from ..recording import (FORMAT, SOURCES, Recording, bag_path, concatenate, write_csv)
+
+HELP = 'record light readings from a robot node (stationary or closed loop) to CSV and MCAP'
+CONDITION_KEYS = ('lamp_distance_mm', 'ambient')
+Policy = Callable[[np.ndarray], tuple[int, int]]
+
+
+# -- conditions ---------------------------------------------------------------------------
+
+def named_conditions() -> dict[str, dict]:
+    """The emulator's lighting conditions (reality/world.py) as robot-node parameters."""
+    from ..reality.world import CONDITIONS
+    return {name: {'lamp_distance_mm': float(c.lamp_distance_mm), 'ambient': float(c.ambient)}
+            for name, c in CONDITIONS.items()}
+
+
+def parse_conditions(text: str) -> dict[str, dict]:
+    """``paper``, a comma list of condition names, or a YAML file {label: {param: value}}."""
+    known = named_conditions()
+    if text.endswith(('.yaml', '.yml')):
+        data = yaml.safe_load(Path(text).read_text())
+        if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+            raise ValueError(f'{text}: expected a mapping of condition labels to parameters')
+        for label, params in data.items():
+            unknown = set(params) - set(CONDITION_KEYS)
+            if unknown:
+                raise ValueError(f'{text}: condition {label!r} sets {sorted(unknown)}; a '
+                                 f'condition sets {list(CONDITION_KEYS)}')
+        return {str(k): dict(v) for k, v in data.items()}
+    from ..reality.world import SECTION2
+    names = SECTION2 if text == 'paper' else tuple(n for n in text.split(',') if n)
+    unknown = [n for n in names if n not in known]
+    if unknown or not names:
+        raise ValueError(f'unknown condition(s) {unknown or text!r}; known: paper, '
+                         f'{", ".join(sorted(known))}, or a YAML file')
+    return {n: known[n] for n in names}
+
+
+# -- the recorder node --------------------------------------------------------------------
+
+class RobotUnavailable(RuntimeError):
+    """The robot node is not there or does not answer."""
+
+
+class Recorder:
+    """Drives one robot node through the topics and keeps what it sends; ROS is loaded lazily.
+
+    On the wire an episode is ``session + episode``: a session number taken from the
+    clock, so a robot node that ran an earlier session never mistakes a new episode
+    for a repeated start of an old one.  Recordings keep the episode numbers 0, 1, ...
+    """
+
+    def __init__(self, node, timeout_s: float = 5.0, pace_s: float = 0.0):
+        from std_msgs.msg import Float64MultiArray, Int32MultiArray
+
+        from ..nodes import Dropped, protocol
+        self.node, self.protocol = node, protocol
+        self.timeout_s, self.pace_s = timeout_s, pace_s
+        self.dropped = Dropped(node)
+        self.resent = 0                 # readings that came again (answered, kept once)
+        self._start = node.create_publisher(Float64MultiArray, protocol.EPISODE_START,
+                                            protocol.QOS)
+        self._cmd = node.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
+        node.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
+                                 protocol.QOS)
+        node.create_subscription(Float64MultiArray, protocol.BEARING, self._on_bearing,
+                                 protocol.QOS)
+        self.session = time.time_ns() // 1_000_000 % 2 ** 30     # ids stay below 2**31
+        self.wire_episode: int | None = None
+        self._light: dict[int, np.ndarray] = {}
+        self._bearing: dict[int, float] = {}
+        self._queue: deque[int] = deque()
+
+    def _on_light(self, msg) -> None:
+        try:
+            batch = self.protocol.unpack_light(msg)
+        except self.protocol.Malformed as exc:
+            self.dropped.add('malformed', str(exc))
+            return
+        if batch.episode != self.wire_episode:
+            self.dropped.add('other_episode', f'light for episode {batch.episode}', warn=False)
+            return
+        if batch.values.shape[0] != 1:
+            self.dropped.add('wrong_robots', f'light has {batch.values.shape[0]} robots, the '
+                             f'recorder drives 1')
+            return
+        if batch.step in self._light:
+            self.resent += 1
+        else:
+            self._light[batch.step] = batch.values[0].copy()
+        self._queue.append(batch.step)
+
+    def _on_bearing(self, msg) -> None:
+        try:
+            batch = self.protocol.unpack_bearing(msg)
+        except self.protocol.Malformed as exc:
+            self.dropped.add('malformed', str(exc))
+            return
+        if batch.episode == self.wire_episode and batch.values.shape[0] == 1:
+            self._bearing.setdefault(batch.step, float(batch.values[0, 0]))
+
+    def wait_for_robot(self, executor, timeout_s: float) -> None:
+        """Until the robot node subscribes to our topics and publishes light."""
+        deadline = time.monotonic() + timeout_s
+        while not (self._start.get_subscription_count() and self._cmd.get_subscription_count()
+                   and self.node.count_publishers(self._light_topic())):
+            if time.monotonic() > deadline:
+                raise RobotUnavailable(f'no robot node on {self._light_topic()} within '
+                                       f'{timeout_s:g} s (is it running, in this namespace and '
+                                       f'ROS_DOMAIN_ID?)')
+            executor.spin_once(timeout_sec=0.05)
+
+    def _light_topic(self) -> str:
+        return self.node.resolve_topic_name(self.protocol.LIGHT)
+
+    def record_episode(self, executor, episode: int, seed: int, steps: int, policy: Policy,
+                       bearing_deg: float | None = None) -> 'EpisodeLog':
+        """Run one episode of ``steps`` readings; returns what came, and what never did."""
+        self.wire_episode, self._light, self._bearing = self.session + episode, {}, {}
+        self._queue.clear()
+        start = self.protocol.pack_episode_start(
+            self.wire_episode, [seed], None if bearing_deg is None else [bearing_deg])
+        answers: dict[int, tuple[int, int]] = {}
+        last_news = sent_start = time.monotonic()
+        self._start.publish(start)
+        next_due, grace = 0.0, None
+        while len(answers) < steps or (len(self._bearing) < len(self._light)
+                                       and time.monotonic() < grace):
+            executor.spin_once(timeout_sec=0.02)
+            now = time.monotonic()
+            while self._queue and now >= next_due:
+                step = self._queue.popleft()
+                if step >= steps:
+                    continue
+                if step not in answers:
+                    answers[step] = policy(self._light[step])
+                    next_due = now + self.pace_s
+                self._cmd.publish(self.protocol.pack_cmd_turn(
+                    self.wire_episode, step, [answers[step][0]], [answers[step][1]]))
+                last_news = now
+                if len(answers) == steps and grace is None:   # bearings may trail the light
+                    grace = now + min(1.0, self.timeout_s)
+            if not self._light and now - sent_start > min(1.0, self.timeout_s / 3):
+                self._start.publish(start)        # the robot ignores a repeated start
+                sent_start = now
+            if now - last_news > self.timeout_s:
+                break
+        return EpisodeLog(episode, dict(self._light), dict(self._bearing), answers,
+                          [s for s in range(steps) if s not in self._light])
+
+
+class EpisodeLog:
+    """One episode as recorded: readings, bearings and answers by step."""
+
+    def __init__(self, episode, light, bearing, answers, lost):
+        self.episode, self.light, self.bearing = episode, light, bearing
+        self.answers, self.lost = answers, lost
+
+    def recording(self, condition: str, manifest: dict, heading_deg: float | None,
+                  acted: bool) -> Recording:
+        """Rows in step order; stationary rows (not ``acted``) leave the command empty."""
+        steps = sorted(self.light)
+        n = len(steps)
+        bearing = np.array([self.bearing.get(s, np.nan) for s in steps], np.float64)
+        if heading_deg is not None:                 # the experimenter's fixed heading
+            bearing = np.where(np.isnan(bearing), heading_deg, bearing)
+        answers = np.array([self.answers.get(s, (np.nan, np.nan)) for s in steps],
+                           np.float64).reshape(n, 2)
+        empty = np.full(n, np.nan)
+        return Recording(
+            np.full(n, self.episode, np.int64), np.array(steps, np.int64), bearing,
+            np.full(n, condition),
+            np.array([self.light[s] for s in steps]).reshape(n, SENSORS),
+            answers[:, 0] if acted else empty, answers[:, 1] if acted else empty, manifest)
+
+
+def hold_still(readings: np.ndarray) -> tuple[int, int]:
+    """The stationary protocol's answer: no turn."""
+    return 1, 0
+
+
+def genome_policy(genome: np.ndarray) -> Policy:
+    weights = network.unpack(genome)
+
+    def policy(readings: np.ndarray) -> tuple[int, int]:
+        direction, power = network.act(weights, readings.reshape(-1, 1))
+        return int(direction[0]), int(power[0])
+    return policy
+
+
+# -- robot node parameters ----------------------------------------------------------------
+
+class RobotParameters:
+    """Get and set a robot node's parameters through its services, and put them back after."""
+
+    def __init__(self, node, executor, robot: str, timeout_s: float):
+        from rclpy.parameter_client import AsyncParameterClient
+        self.executor, self.robot, self.timeout_s = executor, robot, timeout_s
+        self.original: dict = {}
+        self.client = AsyncParameterClient(node, robot)
+        if not self.client.wait_for_services(timeout_sec=timeout_s):
+            raise RobotUnavailable(f'robot node {robot} offers no parameter services within '
+                                   f'{timeout_s:g} s')
+
+    def _wait(self, future):
+        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout_s)
+        if not future.done() or future.result() is None:
+            raise RobotUnavailable(f'robot node {self.robot} did not answer a parameter '
+                                   f'request')
+        return future.result()
+
+    def set(self, values: dict) -> None:
+        from rclpy.parameter import Parameter
+        first = [k for k in values if k not in self.original]
+        if first:
+            self.original.update(self.get(first))
+        params = [Parameter(k, value=float(v) if isinstance(v, float) else v)
+                  for k, v in values.items()]
+        results = self._wait(self.client.set_parameters(params)).results
+        refused = [f'{p.name}: {r.reason}' for p, r in zip(params, results) if not r.successful]
+        if refused:
+            raise ValueError(f'robot node {self.robot} refused ' + '; '.join(refused))
+
+    def restore(self) -> None:
+        """The values the robot node had before this session changed them."""
+        if self.original:
+            self.set(self.original)
+
+    def get(self, names: list[str]) -> dict:
+        from rclpy.parameter import parameter_value_to_python
+        values = self._wait(self.client.get_parameters(names)).values
+        return {n: parameter_value_to_python(v) for n, v in zip(names, values)
+                if v.type != 0}
+
+
+# -- in-process robot nodes ---------------------------------------------------------------
+
+ROBOTS = ('simulator', 'emulator', 'emulator-world')
+
+
+def start_robot(kind: str, context, args) -> tuple[object, Callable[[], None]]:
+    """(robot node, close) for ``--robot``, in this process.
+
+    ``emulator`` is the emulator on a pseudo-terminal behind the hardware bridge:
+    the whole serial path a real Khepera takes.  ``emulator-world`` drives the
+    emulator's world directly, without the serial link.
+    """
+    if kind == 'simulator':
+        from ..nodes.simulator import Simulator
+        return Simulator(context=context, parameter_overrides=_simulator_overrides(args)), \
+            lambda: None
+    from ..reality.effects import EffectsConfig
+    from ..reality.world import EmulatedWorld
+    world = EmulatedWorld(EffectsConfig.load(args.effects) if args.effects else None,
+                          seed=args.seed)
+    if kind == 'emulator-world':
+        return _world_node(world, context), lambda: None
+    from rclpy.parameter import Parameter
+
+    from ..nodes.hardware_bridge import HardwareBridge
+    from ..reality.emulator import Emulator
+    emulator = Emulator(world, seed=args.seed).start()
+    try:
+        bridge = HardwareBridge(context=context, parameter_overrides=[
+            Parameter('ports', value=emulator.ports[:1])])
+    except BaseException:
+        emulator.stop()
+        raise
+    return bridge, emulator.stop
+
+
+def _simulator_overrides(args) -> list:
+    from rclpy.parameter import Parameter
+    return [Parameter('noise_model', value=args.model),
+            Parameter('dependent_level', value=float(args.dependent)),
+            Parameter('independent_level', value=float(args.independent)),
+            Parameter('dependence_groups', value=args.groups),
+            Parameter('distribution', value=args.distribution)]
+
+
+def _world_node(world, context):
+    """A robot node over the emulator's world in this process (no serial link).
+
+    The robot-node geometry parameters place the lamp and set the room, as a
+    hardware bridge declares them to the emulator.
+    """
+    from ..nodes.params import GEOMETRY, world_from
+    from ..nodes.robot_node import RobotNode
+    from ..reality.khepera_robot import InProcessRobots, KheperaRobots
+
+    class InProcessEmulator(RobotNode):
+        def make_backend(self, values):
+            return KheperaRobots(InProcessRobots(world), world_from(values), self.task)
+
+        def apply_parameters(self, values, changed):
+            super().apply_parameters(values, changed)
+            if changed & set(GEOMETRY):
+                self.backend.world = world_from(values)
+
+    return InProcessEmulator('emulator', context=context)
+
+
+# -- the command --------------------------------------------------------------------------
+
+def add_arguments(parser) -> None:
+    from . import _options
+    parser.add_argument('out', type=Path, help='NAME: writes NAME.csv, NAME.yaml and NAME_bag/')
+    parser.add_argument('--protocol', choices=('stationary', 'closed-loop'),
+                        default='stationary')
+    robot = parser.add_mutually_exclusive_group()
+    robot.add_argument('--robot', choices=ROBOTS, default='simulator',
+                       help='robot node to start in-process: the simulator, the emulator '
+                            'behind the hardware bridge, or the emulator\'s world directly')
+    robot.add_argument('--attach', metavar='NODE',
+                       help='record an already running robot node, e.g. /khepera/bridge')
+    parser.add_argument('--source', choices=SOURCES,
+                        help='what the attached node is (required with --attach)')
+    s = parser.add_argument_group('stationary protocol (section 2)')
+    s.add_argument('--conditions', default='paper',
+                   help="'paper' (bulb_1ft, bulb_2ft, room_fluorescent, room_dark), a comma "
+                        "list of condition names, or a YAML file "
+                        "{label: {lamp_distance_mm: .., ambient: ..}}")
+    s.add_argument('--headings', type=float, nargs='+', default=[0.0], metavar='DEG',
+                   help='lamp bearings to record at (0 = straight ahead, CCW positive)')
+    s.add_argument('--samples', type=int, default=60, help='samples per condition and heading')
+    s.add_argument('--period', type=float, default=1.0,
+                   help='sample period, s (the paper: 1 s); see --pace')
+    s.add_argument('--ask', action='store_true',
+                   help='wait for Enter before each condition (to set up a real room)')
+    c = parser.add_argument_group('closed-loop protocol')
+    c.add_argument('--genome', type=Path, help='controller genome (JSON list or evolve result)')
+    c.add_argument('--episodes', type=int, default=10)
+    c.add_argument('--steps', type=int, default=60, help='steps per episode')
+    c.add_argument('--condition', default='task', help='condition name for closed-loop runs')
+    parser.add_argument('--pace', action='store_true',
+                        help='answer readings no faster than one per period (for hardware)')
+    parser.add_argument('--seed', type=int, default=0, help='episode seeds are seed + episode')
+    parser.add_argument('--timeout', type=float, default=5.0,
+                        help='seconds without news before the rest of an episode counts as lost')
+    parser.add_argument('--effects', type=Path,
+                        help='emulator effects YAML (none: the real robot)')
+    parser.add_argument('--no-bag', action='store_true', help='write only CSV + YAML')
+    _options.add_noise_arguments(parser)
+
+
+def run(args) -> int:
+    from ..cli import UsageError
+    if args.attach and not args.source:
+        raise UsageError('--attach needs --source (simulator, emulator or hardware)')
+    if args.protocol == 'closed-loop' and args.genome is None:
+        raise UsageError('the closed-loop protocol needs --genome')
+    for name in ('samples', 'episodes', 'steps'):
+        if getattr(args, name) < 1:
+            raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
+    if not args.period > 0:
+        raise UsageError(f'--period must be > 0, got {args.period}')
+    try:
+        rec, session = record(args)
+    except RobotUnavailable as exc:
+        raise UsageError(str(exc)) from None
+    csv_path, yaml_path = write_csv(rec, args.out)
+    written = [csv_path, yaml_path]
+    if not args.no_bag:
+        from ..bag import write_bag
+        written.append(write_bag(rec, bag_path(args.out), namespace=session['namespace'],
+                                 overwrite=True, start_ns=session['start_ns']))
+    lost = rec.manifest.get('lost_steps', [])
+    print(f'{len(rec)} samples in {len(np.unique(rec.episode))} episodes; '
+          f'{session["resent"]} resent readings kept once; {len(lost)} steps lost'
+          + (f' (first: episode {lost[0][0]}, step {lost[0][1]})' if lost else ''))
+    print('-> ' + ', '.join(str(p) for p in written))
+    return 0 if not lost else 1
+
+
+def record(args, context=None, robot=None) -> tuple[Recording, dict]:
+    """Run the protocol; returns the recording and facts about the session.
+
+    ``context`` is an initialised rclpy Context (default: a new one); ``robot``
+    an in-process robot node to record instead of the one ``args`` names.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    own = context is None
+    if own:
+        context = Context()
+        rclpy.init(context=context)
+    created, close = [], (lambda: None)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        if args.attach and robot is None:
+            namespace = args.attach.rpartition('/')[0]
+            robot_name, source = args.attach, args.source
+        else:
+            if robot is None:
+                robot, close = start_robot(args.robot, context, args)
+                created.append(robot)
+            executor.add_node(robot)
+            namespace, robot_name = robot.get_namespace(), robot.get_fully_qualified_name()
+            source = args.source or args.robot.partition('-')[0]
+        node = Node('recorder', namespace=namespace or '/', context=context)
+        created.append(node)
+        executor.add_node(node)
+        recorder = Recorder(node, args.timeout, args.period if args.pace else 0.0)
+        params = RobotParameters(node, executor, robot_name, args.timeout)
+        recorder.wait_for_robot(executor, args.timeout)
+        start_ns = time.time_ns()
+        protocol = _stationary if args.protocol == 'stationary' else _closed_loop
+        try:
+            rec = protocol(args, recorder, executor, params, source)
+        finally:
+            params.restore()
+        return rec, {'start_ns': start_ns, 'resent': recorder.resent,
+                     'dropped': dict(recorder.dropped), 'namespace': namespace}
+    finally:
+        executor.shutdown()
+        for n in created:
+            n.destroy_node()
+        close()
+        if own:
+            context.try_shutdown()
+
+
+def _base_manifest(args, params: RobotParameters, source: str, protocol: str) -> dict:
+    manifest = {'format': FORMAT, 'source': source, 'sample_period_s': args.period,
+                'protocol': protocol, 'conditions': {},
+                'recorded_at': datetime.now(timezone.utc).isoformat(timespec='seconds'),
+                'robot_node': params.robot}
+    if source == 'simulator':
+        noise = params.get(['noise_model', 'dependent_level', 'independent_level',
+                            'dependence_groups', 'distribution'])
+        manifest['noise'] = noise
+    return manifest
+
+
+def _stationary(args, recorder, executor, params, source) -> Recording:
+    conditions = parse_conditions(args.conditions)
+    manifest = _base_manifest(args, params, source, 'stationary')
+    manifest.update(conditions=conditions, headings_deg=list(args.headings),
+                    samples_per_episode=args.samples)
+    params.set({'perturbation_deg': 0.0, 'steps': args.samples})
+    parts, lost, episode = [], [], 0
+    for label, world in conditions.items():
+        params.set(world)
+        if args.ask:
+            input(f'Set up condition {label} ({world}) and press Enter: ')
+        for heading in args.headings:
+            log = recorder.record_episode(executor, episode, args.seed + episode, args.samples,
+                                          hold_still, heading)
+            lost += [[episode, s] for s in log.lost]
+            parts.append(log.recording(label, manifest, heading, acted=False))
+            episode += 1
+    manifest['lost_steps'] = lost
+    return concatenate(parts, manifest)
+
+
+def _closed_loop(args, recorder, executor, params, source) -> Recording:
+    from .evolve import load_genome
+    genome = network.check_genomes(load_genome(args.genome))[0]
+    conditions = named_conditions()
+    if args.condition not in conditions:
+        raise ValueError(f'unknown condition {args.condition!r}; known: {sorted(conditions)}')
+    manifest = _base_manifest(args, params, source, 'closed_loop')
+    manifest.update(conditions={args.condition: conditions[args.condition]},
+                    genome=genome.tolist())
+    task = params.get(['perturb_every', 'perturbation_deg'])
+    params.set({'steps': args.steps, **conditions[args.condition]})
+    manifest['task'] = {'steps': args.steps, **task}
+    policy = genome_policy(genome)
+    parts, lost = [], []
+    for episode in range(args.episodes):
+        log = recorder.record_episode(executor, episode, args.seed + episode, args.steps,
+                                      policy)
+        lost += [[episode, s] for s in log.lost]
+        parts.append(log.recording(args.condition, manifest, None, acted=True))
+    manifest['lost_steps'] = lost
+    return concatenate(parts, manifest)
