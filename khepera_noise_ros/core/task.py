@@ -36,6 +36,15 @@ class Task:
                              f'{self.perturbation_deg!r}')
 
 
+def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
+    """The heading perturbation, degrees on the 0.1 deg grid, from the PERTURB channel.
+
+    Shared with the hardware bridge so that simulator and robot get the same knocks.
+    """
+    knock = (2 * realrand(perturb_draws) - 1) * task.perturbation_deg
+    return to_degrees(to_tenths(knock))
+
+
 def fitness_factors(readings: np.ndarray, power: np.ndarray):
     """(balance, intensity, turning), each (B,), from (>=6, B) readings and (B,) power."""
     left = (readings[0] + readings[1] + readings[2]) * np.float32(1 / 3)
@@ -112,8 +121,8 @@ class Episodes:
     def _sense(self) -> np.ndarray:
         draws = self._stream.draw(self.step_index, streams.GROUP.start + len(self.noise.groups))
         if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
-            knock = (2 * realrand(draws[streams.PERTURB]) - 1) * self.task.perturbation_deg
-            self._bearing = self._bearing + to_tenths(knock)
+            self._bearing = self._bearing + to_tenths(knock_deg(draws[streams.PERTURB],
+                                                                self.task))
         self._bearing %= TENTHS
         # indices are in range after the modulo; 'clip' skips the bounds check of 'raise'
         base = np.take(self._table, self._bearing, axis=1, mode='clip')

@@ -1,0 +1,99 @@
+"""The hardware bridge node: a RobotNode whose robots are Kheperas on serial ports.
+
+Same topics, parameters and protocol as the simulator (see RobotNode), so the
+controller and the evolution manager run unchanged; the episode logic and the
+serial protocol live in ``reality.khepera_robot``.  ``ports`` lists one serial
+port per robot (the emulator's printed devices, or e.g. /dev/ttyUSB0).  A robot
+that cannot be reached after ``retries`` fails the episode, which the robot
+node logs and drops; the motors are stopped when that happens and when the
+node shuts down.  Serial settings apply from the next episode: changing them
+closes the ports (stopping the motors) and reopens them on demand.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+from rclpy.parameter import Parameter
+
+from ..reality.khepera_robot import TURN_MODES, KheperaRobots, SerialRobots
+from ..reality.serial_protocol import SPEED_MAX, Wheels
+from . import spin_node
+from .params import GEOMETRY, SEED_MAX, Spec, check_choice, task_from, world_from
+from .robot_node import RobotNode
+from .simulator import SIMULATOR_SPECS
+
+SERIAL = ('ports', 'baudrate', 'timeout_s', 'retries', 'turn_mode', 'turn_speed',
+          'wheel_base_mm')
+
+BRIDGE_SPECS = tuple(s for s in SIMULATOR_SPECS if s.name in ('deg_per_power', 'seed')) + (
+    Spec('ports', ['/dev/ttyUSB0'], 'Serial ports, one per robot; an episode of B robots uses '
+         'the first B.', type_=Parameter.Type.STRING_ARRAY),
+    Spec('baudrate', 9600, 'Serial speed, bits/s (the Khepera\'s default is 9600).',
+         50, 4000000),
+    Spec('timeout_s', 0.5, 'Longest wait for a reply before the command is sent again, s.',
+         0.001, 60.0),
+    Spec('retries', 3, 'Times a command that got no (or a garbled) reply is sent again '
+         'before the episode fails.', 0, 100),
+    Spec('turn_mode', 'position', 'position: turn with the position counters (G, C, H); '
+         'speed: opposite wheel speeds (D) for the time the turn takes.', choices=TURN_MODES),
+    Spec('turn_speed', 20, 'Wheel speed in turn_mode speed, pulses per 10 ms (8 mm/s each).',
+         1, SPEED_MAX),
+    Spec('wheel_base_mm', Wheels.wheel_base_mm, 'Distance between the wheels, mm: a degree '
+         'of turn in place is wheel_base_mm * pi / 360 / 0.08 pulses per wheel.', 10.0, 1000.0),
+)
+
+
+def serial_robots(values: dict[str, Any], logger=None) -> SerialRobots:
+    """The robots on the ports (nothing is opened yet); ValueError names a bad setting."""
+    check_choice('turn_mode', values['turn_mode'], TURN_MODES)
+    return SerialRobots(values['ports'], baudrate=values['baudrate'],
+                        timeout_s=values['timeout_s'], retries=values['retries'],
+                        turn_mode=values['turn_mode'], turn_speed=values['turn_speed'],
+                        logger=logger)
+
+
+class HardwareBridge(RobotNode):
+    """Kheperas on serial ports; see RobotNode for the protocol."""
+
+    EXTRA_SPECS = BRIDGE_SPECS
+
+    def __init__(self, node_name: str = 'hardware_bridge', **kwargs):
+        super().__init__(node_name, **kwargs)
+
+    def make_backend(self, values: dict[str, Any]) -> KheperaRobots:
+        return KheperaRobots(serial_robots(values, self.get_logger()), world_from(values),
+                             task_from(values), Wheels(values['wheel_base_mm']))
+
+    def check_parameters(self, values: dict[str, Any]) -> None:
+        super().check_parameters(values)
+        serial_robots(values)
+        Wheels(values['wheel_base_mm'])
+
+    def apply_parameters(self, values: dict[str, Any], changed: set[str]) -> None:
+        super().apply_parameters(values, changed)
+        if changed & set(SERIAL):
+            self.backend.close()
+            self.backend = self.make_backend(values)
+            if self.episode is not None:
+                self.get_logger().warning(f'episode {self.episode} ended: serial settings '
+                                          'changed')
+                self.episode, self._last = None, []
+        elif changed & (set(GEOMETRY) | {'deg_per_power'}):
+            self.backend.world = world_from(values)
+
+    def realtime_episode(self, count: int) -> tuple[int, int]:
+        return (self.values['seed'] + count) % (SEED_MAX + 1), len(self.values['ports'])
+
+    def destroy_node(self) -> None:
+        """Stop the motors and close the ports before the node goes."""
+        self.backend.close()
+        super().destroy_node()
+
+
+def main(args=None) -> int:
+    return spin_node(HardwareBridge, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,261 @@
+"""The robot emulator: an EmulatedWorld's robots on pseudo-terminals, one per robot.
+
+Each robot answers the Khepera serial protocol (``serial_protocol``) on its own
+pty, so the hardware bridge and any serial tool talk to it as to a robot on a
+serial cable.  Time is virtual: a position move (``C``) completes at once, and
+one ``O`` is one sample period of the world.  Wheel speeds set with ``D`` do
+turn the robot in wall-clock time, as on a real robot.  Translation is ignored:
+the emulated robot stands at a fixed position, as in the paper's task.
+
+Besides the robot's commands it answers ``Z``, the experimenter's extension:
+``Z,L,<lamp_distance_mm>,<ambient>`` sets the lighting condition,
+``Z,B,<deg>`` puts the lamp at a bearing and ``Z,R`` reports the true bearing.
+Its answer to ``B`` names protocol ``emulator``, which is how a bridge knows it
+may use them.  A line it cannot execute is answered ``?,<reason>``.
+
+``inject`` makes the next replies of a robot fail (silent, garbled or short)
+and ``unplug`` makes its device disappear, to exercise a bridge's fault
+handling; ``fault_rate`` does the former at random.
+"""
+from __future__ import annotations
+
+import os
+import selectors
+import threading
+import time
+import tty
+from collections import Counter, deque
+
+import numpy as np
+
+from . import serial_protocol as sp
+from .world import Condition, EmulatedWorld
+
+VERSION = ('5.02', 'emulator')
+FAULTS = ('silent', 'garbled', 'short')
+
+
+class _Robot:
+    """One robot's wheels and line buffer; its light and heading live in the world."""
+
+    def __init__(self, index: int):
+        self.index = index
+        self.buffer = b''
+        self.counters = np.zeros(2)             # position counters, pulses (fractional)
+        self.speeds = np.zeros(2)               # pulses per 10 ms
+        self.since = time.monotonic()
+        self.faults: deque[str] = deque()
+        self.served: Counter = Counter()
+        self.master = -1
+        self.slave = -1
+        self.port = ''
+
+
+class Emulator:
+    """Serves ``world``'s robots until ``stop()``; use as a context manager."""
+
+    def __init__(self, world: EmulatedWorld, wheels: sp.Wheels = sp.Wheels(),
+                 fault_rate: float = 0.0, seed: int = 0):
+        if not 0.0 <= fault_rate <= 1.0:
+            raise ValueError(f'fault_rate must be in [0, 1], got {fault_rate!r}')
+        self.world, self.wheels, self.fault_rate = world, wheels, fault_rate
+        self._rng = np.random.default_rng(seed)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self._unplugged: set[int] = set()
+        self._thread: threading.Thread | None = None
+        self.robots = [self._open_pty(_Robot(i)) for i in range(world.robots)]
+
+    @staticmethod
+    def _open_pty(robot: _Robot) -> _Robot:
+        robot.master, robot.slave = os.openpty()
+        tty.setraw(robot.slave)                  # no echo, no line editing, bytes as sent
+        os.set_blocking(robot.master, False)
+        robot.port = os.ttyname(robot.slave)
+        return robot
+
+    @property
+    def ports(self) -> list[str]:
+        """Device paths, one per robot, to open as serial ports."""
+        return [r.port for r in self.robots]
+
+    def served(self, robot: int) -> Counter:
+        """Commands answered so far by ``robot``, by letter."""
+        with self._lock:
+            return Counter(self.robots[robot].served)
+
+    def inject(self, robot: int, fault: str, count: int = 1) -> None:
+        """Make the next ``count`` replies of ``robot`` fail with ``fault``."""
+        if fault not in FAULTS:
+            raise ValueError(f'fault must be one of {FAULTS}, got {fault!r}')
+        with self._lock:
+            self.robots[robot].faults.extend([fault] * count)
+
+    def unplug(self, robot: int) -> None:
+        """The robot's device disappears, as when its cable is pulled."""
+        with self._lock:
+            self._unplugged.add(robot)
+        os.write(self._wake_w, b'u')
+
+    # --- running ----------------------------------------------------------------------
+
+    def start(self) -> 'Emulator':
+        self._thread = threading.Thread(target=self.serve, name='khepera-emulator',
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and remove the devices; safe to call twice."""
+        self._stop.set()
+        try:
+            os.write(self._wake_w, b's')
+        except OSError:
+            pass
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self._close_all()
+
+    def __enter__(self) -> 'Emulator':
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def serve(self) -> None:
+        """Answer commands until stop(); runs in the calling thread."""
+        with selectors.DefaultSelector() as selector:
+            selector.register(self._wake_r, selectors.EVENT_READ, None)
+            for robot in self.robots:
+                selector.register(robot.master, selectors.EVENT_READ, robot)
+            while not self._stop.is_set():
+                for key, _ in selector.select(timeout=0.5):
+                    if key.data is None:
+                        os.read(self._wake_r, 64)
+                        self._unplug_pending(selector)
+                    else:
+                        self._receive(key.data, selector)
+
+    def _unplug_pending(self, selector) -> None:
+        with self._lock:
+            pending, self._unplugged = self._unplugged, set()
+        for i in pending:
+            robot = self.robots[i]
+            if robot.master >= 0:
+                selector.unregister(robot.master)
+                self._close_robot(robot)
+
+    def _receive(self, robot: _Robot, selector) -> None:
+        if robot.master < 0:                     # unplugged earlier in this round
+            return
+        try:
+            data = os.read(robot.master, 4096)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b''
+        if not data:                             # the device is gone
+            selector.unregister(robot.master)
+            self._close_robot(robot)
+            return
+        robot.buffer += data.replace(b'\n', b'\r')
+        *lines, robot.buffer = robot.buffer.split(b'\r')
+        for line in lines:
+            if line:
+                self._reply(robot, self.answer(robot.index, line))
+
+    def _reply(self, robot: _Robot, reply: bytes) -> None:
+        with self._lock:
+            fault = robot.faults.popleft() if robot.faults else None
+        if fault is None and self.fault_rate and self._rng.random() < self.fault_rate:
+            fault = FAULTS[self._rng.integers(len(FAULTS))]
+        if fault == 'silent':
+            return
+        body = bytearray(reply[:-len(sp.LINE_END)])
+        if fault == 'garbled':                   # one byte in the middle corrupted
+            body[len(body) // 2] = ord('~')
+            reply = bytes(body) + sp.LINE_END
+        elif fault == 'short':                   # the second half lost
+            reply = bytes(body[:len(body) // 2]) + sp.LINE_END
+        try:
+            os.write(robot.master, reply)
+        except OSError:                          # nobody reads, or the device is gone
+            pass
+
+    # --- the protocol -------------------------------------------------------------------
+
+    def answer(self, index: int, line: bytes) -> bytes:
+        """The reply of robot ``index`` to one command line."""
+        robot = self.robots[index]
+        try:
+            command = sp.parse_command(line)
+        except sp.ProtocolError as exc:
+            return sp.format_error(str(exc))
+        with self._lock:
+            robot.served[command.letter] += 1
+        self._advance(robot)
+        letter, args = command.letter, command.args
+        if letter == 'B':
+            return sp.format_reply('B', *VERSION)
+        if letter == 'O':
+            return sp.format_reply('O', *self.world.read(index))
+        if letter == 'H':
+            return sp.format_reply('H', *np.rint(robot.counters))
+        if letter == 'G':
+            robot.counters[:] = args
+        elif letter == 'D':
+            robot.speeds[:] = args
+        elif letter == 'C':
+            robot.speeds[:] = 0.0
+            self._move(robot, np.asarray(args, np.float64) - robot.counters)
+        elif letter == 'Z':
+            return self._experimenter(index, args)
+        return sp.format_reply(letter)
+
+    def _experimenter(self, index: int, args: tuple) -> bytes:
+        sub, values = args[0], args[1:]
+        try:
+            if sub == sp.Z_LIGHT:
+                self.world.set_condition(Condition(*values), index)
+            elif sub == sp.Z_BEARING:
+                self.world.set_bearing(values[0], index)
+        except ValueError as exc:
+            return sp.format_error(str(exc))
+        if sub == sp.Z_READ_BEARING:
+            return sp.format_z_reply(sub, float(self.world.bearing_deg[index]))
+        return sp.format_z_reply(sub)
+
+    def _advance(self, robot: _Robot) -> None:
+        """Let the wheels run at their speeds for the wall-clock time since the last look."""
+        now = time.monotonic()
+        if robot.speeds.any():
+            self._move(robot, robot.speeds * (now - robot.since) * 100.0)
+        robot.since = now
+
+    def _move(self, robot: _Robot, travel: np.ndarray) -> None:
+        robot.counters += travel
+        turn = self.wheels.rotation_deg(*travel)
+        if turn:
+            self.world.turn(turn, robot.index)
+
+    # --- devices ------------------------------------------------------------------------
+
+    def _close_robot(self, robot: _Robot) -> None:
+        for fd in (robot.master, robot.slave):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        robot.master = robot.slave = -1
+
+    def _close_all(self) -> None:
+        for robot in self.robots:
+            self._close_robot(robot)
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._wake_r = self._wake_w = -1

@@ -1,0 +1,155 @@
+"""The emulated physical world: robots at fixed positions, a lamp, a room, and the effects.
+
+Pure numpy and in-process (no serial port): the emulator serves it over a
+pseudo-terminal, and the diagnosis benchmark and experiment runner may use it
+directly.  The light each sensor receives comes from the simulator's geometry
+(``core.khepera.World.response``: that is shared physics); everything between
+that light and the integer a sensor reports is ``effects.SensorChain``.
+
+Each robot has its own random streams, spawned from ``seed``: one for its
+sensors, one for its wheels.  A robot's readings therefore depend only on the
+seed, its index and how often it has been read and turned, never on the other
+robots.  Time is virtual: one ``read`` is one sample period.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.khepera import DARK, SENSOR_ANGLES_DEG, SENSORS, World
+from .effects import DRAWS, EffectsConfig, SensorChain, turn_error
+
+LAMP_OFF_MM = 1e4           # a lamp this far away lights nothing
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A lighting condition: how far the lamp is and how dark the room is.
+
+    ``ambient`` is what a sensor that sees no lamp reads (0 bright .. 525
+    dark); ``lamp_distance_mm`` is in the simulator's geometry, where the lamp
+    lights nothing beyond ``World.reach_mm``.
+    """
+
+    lamp_distance_mm: float = World.lamp_distance_mm
+    ambient: float = World.ambient
+
+    def __post_init__(self):
+        World(lamp_distance_mm=self.lamp_distance_mm, ambient=self.ambient)   # range checks
+
+    def world(self, geometry: World = World()) -> World:
+        return dataclasses.replace(geometry, lamp_distance_mm=self.lamp_distance_mm,
+                                   ambient=self.ambient)
+
+
+# The task's arena, and section 2's four measurements (lamp straight ahead; the labels of
+# ``synchrony.PAPER_CORRELATION``).  The bulb distances are chosen so that the two front
+# sensors read about 90 (1 ft) and 290 (2 ft); the room with the lights on reads about 250.
+CONDITIONS = {
+    'task': Condition(),
+    'bulb_1ft': Condition(lamp_distance_mm=14.0, ambient=500.0),
+    'bulb_2ft': Condition(lamp_distance_mm=130.0, ambient=500.0),
+    'room_fluorescent': Condition(lamp_distance_mm=LAMP_OFF_MM, ambient=250.0),
+    'room_dark': Condition(lamp_distance_mm=LAMP_OFF_MM, ambient=500.0),
+}
+SECTION2 = ('bulb_1ft', 'bulb_2ft', 'room_fluorescent', 'room_dark')
+
+
+def condition_named(name) -> Condition:
+    if isinstance(name, Condition):
+        return name
+    if name not in CONDITIONS:
+        raise ValueError(f'unknown lighting condition {name!r}; known: {sorted(CONDITIONS)}')
+    return CONDITIONS[name]
+
+
+class EmulatedWorld:
+    """``robots`` Kheperas, each in its own copy of the room, under ``config``'s effects."""
+
+    def __init__(self, config: EffectsConfig | None = None, seed: int = 0, robots: int = 1,
+                 geometry: World = World()):
+        if not isinstance(robots, (int, np.integer)) or robots < 1:
+            raise ValueError(f'robots must be an integer >= 1, got {robots!r}')
+        self.config = EffectsConfig.real_robot() if config is None else config
+        self.geometry = geometry
+        self.robots = int(robots)
+        sensors, wheels = np.random.SeedSequence(seed).spawn(2)
+        self._sensor_rng = [np.random.default_rng(s) for s in sensors.spawn(self.robots)]
+        self._wheel_rng = [np.random.default_rng(s) for s in wheels.spawn(self.robots)]
+        start = np.stack([rng.standard_normal(SENSORS) for rng in self._sensor_rng])
+        self._chain = SensorChain(self.config, self.robots, start)
+        self._bearing = np.zeros(self.robots)
+        self._worlds = [geometry] * self.robots
+        self.conditions = [Condition(geometry.lamp_distance_mm, geometry.ambient)] * self.robots
+        self.samples = np.zeros(self.robots, np.int64)
+
+    def _rows(self, robot) -> np.ndarray:
+        """Robot indices: all for None, one for an int, or those of a sequence."""
+        if robot is None:
+            return np.arange(self.robots)
+        rows = np.atleast_1d(np.asarray(robot))
+        if rows.ndim != 1 or not np.issubdtype(rows.dtype, np.integer) \
+                or ((rows < 0) | (rows >= self.robots)).any() or np.unique(rows).size < rows.size:
+            raise ValueError(f'robot must be an index in [0, {self.robots}) or a sequence of '
+                             f'distinct ones, got {robot!r}')
+        return rows
+
+    @property
+    def bearing_deg(self) -> np.ndarray:
+        """Ground truth: lamp bearing in each robot's frame, degrees CCW, in [-180, 180)."""
+        return (self._bearing + 180.0) % 360.0 - 180.0
+
+    def set_condition(self, condition: Condition | str, robot=None) -> None:
+        """Place the lamp and set the room's light, as the experimenter would."""
+        condition = condition_named(condition)
+        for r in self._rows(robot):
+            self.conditions[r] = condition
+            self._worlds[r] = condition.world(self.geometry)
+
+    def set_bearing(self, deg, robot=None) -> None:
+        """Put the lamp at ``deg`` in the robot's frame (the experimenter turns the robot)."""
+        deg = np.asarray(deg, np.float64)
+        if not np.isfinite(deg).all():
+            raise ValueError(f'bearing must be finite degrees, got {deg}')
+        self._bearing[self._rows(robot)] = deg
+
+    def turn(self, deg, robot=None) -> np.ndarray:
+        """Turn in place by ``deg`` commanded degrees, positive clockwise (right), which
+        moves the lamp counter-clockwise in the robot's frame; returns the actual turn."""
+        rows = self._rows(robot)
+        deg = np.broadcast_to(np.asarray(deg, np.float64), rows.shape)
+        if not np.isfinite(deg).all():
+            raise ValueError(f'turn must be finite degrees, got {deg}')
+        z = np.array([self._wheel_rng[r].standard_normal() for r in rows])
+        actual = turn_error(self.config.actuator_turn_error, deg, z)
+        self._bearing[rows] += actual
+        return actual
+
+    def light(self, rows: np.ndarray) -> np.ndarray:
+        """(n, 8) ideal readings: the simulator's light response, no effects."""
+        relative = self._bearing[rows, None] - np.asarray(SENSOR_ANGLES_DEG)[None, :]
+        out = np.empty((rows.size, SENSORS))
+        worlds = [self._worlds[r] for r in rows]
+        for world in set(worlds):                 # robots under one condition at once
+            same = np.array([w == world for w in worlds])
+            out[same] = world.response(relative[same])
+        return np.clip(out, 0.0, DARK)
+
+    def read(self, robot=None) -> np.ndarray:
+        """One sample of the light sensors: (robots, 8) ints; (8,) for an int ``robot``,
+        (n, 8) for a sequence of n robots."""
+        rows = self._rows(robot)
+        z = np.stack([self._sensor_rng[r].standard_normal(DRAWS) for r in rows])
+        readings = self._chain.measure(self.light(rows), z, rows)
+        self.samples[rows] += 1
+        return readings[0] if np.ndim(robot) == 0 and robot is not None else readings
+
+
+def stationary(world: EmulatedWorld, condition: Condition | str, samples: int,
+               bearing_deg: float = 0.0, robot: int = 0) -> np.ndarray:
+    """(samples, 8) readings of a robot that stands still: section 2's measurement."""
+    world.set_condition(condition, robot)
+    world.set_bearing(bearing_deg, robot)
+    return np.stack([world.read(robot) for _ in range(samples)])
