@@ -140,3 +140,46 @@ def test_ea_rejects_bad_settings_and_fitness():
     ea = evolution.SteadyStateEA(evolution.EAConfig(population=2, generations=1))
     with pytest.raises(ValueError, match='2 finite fitness'):
         ea.tell([0.5])
+
+
+def _sequential_reference(cfg, seed, evaluate):
+    """The appendix's EA written the plain way: one tournament after another."""
+    rng = np.random.default_rng(seed)
+    pop = rng.uniform(-cfg.init_range, cfg.init_range, (cfg.population, network.GENES))
+    fit = evaluate(pop, rng.integers(0, 2**53, cfg.population)).astype(float)
+    per = 2 if cfg.fitness == 'reevaluate' else 1
+    draws = [(rng.choice(cfg.population, 2, replace=False),
+              rng.uniform(-cfg.mutation_range, cfg.mutation_range, network.GENES),
+              rng.integers(0, 2**53, per)) for _ in range(cfg.generations * cfg.population)]
+    best, history = (fit.max(), 0), [fit.max()]
+    for k, ((i, j), noise, seeds) in enumerate(draws):
+        if cfg.fitness == 'reevaluate':
+            fit[[i, j]] = evaluate(pop[[i, j]], seeds)
+            best = max(best, (fit[i], k // cfg.population + 1), (fit[j], k // cfg.population + 1),
+                       key=lambda b: b[0])
+        w, loser = (i, j) if fit[i] >= fit[j] else (j, i)
+        pop[loser] = pop[w] + noise
+        fit[loser] = -np.inf
+        if cfg.fitness == 'stored':
+            fit[loser] = evaluate(pop[loser][None], seeds)[0]
+            best = max(best, (fit[loser], k // cfg.population + 1), key=lambda b: b[0])
+        if (k + 1) % cfg.population == 0:
+            history.append(fit[np.isfinite(fit)].max())
+    return pop, best, history
+
+
+@pytest.mark.parametrize('mode', evolution.FITNESS_MODES)
+def test_batched_tournaments_equal_the_sequential_algorithm(mode):
+    ev = CoreEvaluator(task=task.Task(steps=15))
+    cfg = evolution.EAConfig(population=12, generations=6, fitness=mode)
+    ea = evolution.SteadyStateEA(cfg, seed=11)
+    rounds = 0
+    while not ea.done:
+        ea.tell(ev(*ea.ask()))
+        rounds += 1
+    pop, (best, generation), history = _sequential_reference(cfg, 11, ev)
+    assert np.array_equal(ea.population, pop)
+    assert ea.best_fitness == best and ea.best_generation == generation
+    assert [h.best for h in ea.history] == history
+    sequential_rounds = 1 + cfg.generations * cfg.population
+    assert rounds < sequential_rounds / 2      # disjoint tournaments share a batch

@@ -1,0 +1,233 @@
+"""Settings of the replication: every number of section 4 and the appendix, in one place.
+
+The defaults reproduce the paper.  A YAML file (``config/replicate.yaml`` is a
+commented copy of the defaults) overrides any of them; keys it does not give
+keep their default, and an unknown key is an error that names it.  ``quick``
+holds the overrides ``--quick`` applies on top.  The settings actually used are
+written next to the results, with a hash that the results store checks on
+resume.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from ..core.evolution import EAConfig
+from ..core.khepera import World
+from ..core.noise import DEFAULT_GROUPS, NoiseModel
+from ..core.task import Task
+from ..reality.effects import EffectsConfig
+
+FORMAT = 'khepera-noise-replicate-config/1'
+MODELS = ('combination', 'independent')     # the compared models, the paper's order
+SIMULATION_BACKENDS = ('graph', 'core')
+REALITY_BACKENDS = ('emulator', 'world', 'hardware')
+
+DEFAULTS: dict = {
+    'seed': 1998,
+    'trials': 10,
+    'test_episodes': 1,
+    'dependence_groups': [list(g) for g in DEFAULT_GROUPS],
+    'distribution': 'uniform',
+    'levels': [
+        {'label': '5%', 'figure': 'fig9',
+         'combination': {'dependent': 0.03, 'independent': 0.02}, 'independent': 0.05},
+        {'label': '10%', 'figure': 'fig10',
+         'combination': {'dependent': 0.05, 'independent': 0.05}, 'independent': 0.10},
+    ],
+    'phase1': {'population': 25, 'generations': 50, 'init_range': 0.4, 'mutation_range': 1.0,
+               'fitness': 'stored', 'best': 'ever', 'retest_episodes': 5},
+    'phase2': {'population': 10, 'generations': 5, 'init_range': 0.4, 'mutation_range': 1.0,
+               'fitness': 'stored', 'best': 'ever', 'retest_episodes': 5},
+    'task': {'steps': 60, 'perturb_every': 5, 'perturbation_deg': 30.0},
+    'world': {'lamp_distance_mm': 5.0, 'ambient': 500.0, 'gain': 450.0, 'reach_mm': 250.0,
+              'half_angle_deg': 60.0, 'floor': 50.0, 'deg_per_power': 3.0},
+    'backend': {'simulation': 'graph', 'reality': 'emulator'},
+    # the emulated robot's world: robots in a batch, its seed, and its effects
+    # (a mapping for reality.effects.EffectsConfig.from_dict, or the path of such a file)
+    'reality': {'robots': 40, 'seed': 1, 'effects': {}},
+    'quick': {'trials': 3},
+}
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One arm of the experiment: a noise level and the model the simulator uses."""
+
+    level: str            # the level's label, e.g. '5%'
+    model: str            # 'combination' or 'independent'
+    noise: NoiseModel
+
+    @property
+    def name(self) -> str:
+        """The paper's name, as in Table 1: '5% combination'."""
+        return f'{self.level} {self.model}'
+
+    @property
+    def key(self) -> str:
+        """A file-name-safe form of ``name``: '5pct-combination'."""
+        return f"{self.level.replace('%', 'pct').replace(' ', '_')}-{self.model}"
+
+
+@dataclass(frozen=True)
+class Level:
+    label: str
+    figure: str
+    conditions: tuple[Condition, Condition]   # (combination, independent)
+
+
+@dataclass(frozen=True)
+class ReplicateConfig:
+    """Validated settings; ``data`` is the plain form that is written and hashed."""
+
+    data: dict
+    seed: int
+    trials: int
+    test_episodes: int
+    levels: tuple[Level, ...]
+    phase1: EAConfig
+    phase2: EAConfig
+    task: Task
+    world: World
+    reality: dict
+    backend: dict
+
+    @property
+    def effects(self) -> EffectsConfig:
+        """What the emulated reality does beyond the simulator's light response."""
+        return EffectsConfig.from_dict(self.reality['effects'])
+
+    @property
+    def conditions(self) -> tuple[Condition, ...]:
+        return tuple(c for level in self.levels for c in level.conditions)
+
+    @property
+    def hash(self) -> str:
+        """Digest of every setting that changes a result (not the ``quick`` preset)."""
+        text = json.dumps(self.data, sort_keys=True, separators=(',', ':'))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def to_yaml(self) -> str:
+        head = {'format': FORMAT, 'hash': self.hash}
+        return yaml.safe_dump({**head, **self.data}, sort_keys=False)
+
+
+def load(path=None, quick: bool = False, overrides: dict | None = None) -> ReplicateConfig:
+    """Defaults, then the file at ``path``, then ``quick``'s overrides, then ``overrides``."""
+    data = copy.deepcopy(DEFAULTS)
+    if path is not None:
+        data = merge(data, read_yaml(path), str(path))
+    if quick:
+        data = merge(data, data['quick'], 'quick')
+    if overrides:
+        data = merge(data, overrides, 'command line')
+    return build(data)
+
+
+def read_yaml(path) -> dict:
+    path = Path(path)
+    with path.open() as f:
+        try:
+            loaded = yaml.safe_load(f)
+        except yaml.YAMLError as exc:
+            raise ValueError(f'{path} is not valid YAML: {exc}') from None
+    loaded = loaded or {}
+    if not isinstance(loaded, dict):
+        raise ValueError(f'{path} must hold a mapping of settings, got {type(loaded).__name__}')
+    loaded.pop('format', None)
+    loaded.pop('hash', None)       # a results directory's config.yaml can be read back
+    reality = loaded.get('reality')
+    if isinstance(reality, dict) and isinstance(reality.get('effects'), str):
+        reality['effects'] = str(path.parent / reality['effects'])   # beside the file
+    return loaded
+
+
+def merge(base: dict, update: dict, source: str, where: str = '') -> dict:
+    """``update`` laid over ``base``; nested mappings merge (an empty default is free-form)."""
+    if not isinstance(update, dict):
+        raise ValueError(f'{source}: {where or "settings"} must be a mapping, got {update!r}')
+    out = dict(base)
+    for key, value in update.items():
+        name = f'{where}.{key}' if where else key
+        if key not in base:
+            raise ValueError(f'{source}: unknown setting {name!r}; known: {sorted(base)}')
+        if isinstance(base[key], dict) and base[key]:
+            out[key] = merge(base[key], value, source, name)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def build(data: dict) -> ReplicateConfig:
+    """Check the plain settings and make the typed config; errors name the setting."""
+    seed = _integer(data, 'seed', 0)
+    trials = _integer(data, 'trials', 2)
+    test_episodes = _integer(data, 'test_episodes', 1)
+    groups = data['dependence_groups']
+    distribution = data['distribution']
+    levels = tuple(_level(spec, groups, distribution, i) for i, spec in enumerate(data['levels']))
+    if not levels:
+        raise ValueError('levels: at least one noise level is needed')
+    for what in ('label', 'figure'):
+        names = [getattr(level, what) for level in levels]
+        if len(set(names)) != len(names):
+            raise ValueError(f'levels: each {what} must be unique, got {names}')
+    backend = data['backend']
+    for name, allowed in (('simulation', SIMULATION_BACKENDS), ('reality', REALITY_BACKENDS)):
+        if backend[name] not in allowed:
+            raise ValueError(f'backend.{name} must be one of {allowed}, got {backend[name]!r}')
+    plain = {k: v for k, v in copy.deepcopy(data).items() if k != 'quick'}
+    _integer(plain['reality'], 'robots', 1, 'reality.')
+    _integer(plain['reality'], 'seed', 0, 'reality.')
+    plain['reality']['effects'] = effects_from(plain['reality']['effects']).to_dict()
+    return ReplicateConfig(
+        data=plain, seed=seed, trials=trials, test_episodes=test_episodes, levels=levels,
+        phase1=_typed(EAConfig, data, 'phase1'), phase2=_typed(EAConfig, data, 'phase2'),
+        task=_typed(Task, data, 'task'), world=_typed(World, data, 'world'),
+        reality=plain['reality'], backend=plain['backend'])
+
+
+def _integer(data: dict, name: str, low: int, where: str = '') -> int:
+    value = data[name]
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ValueError(f'{where}{name} must be an integer >= {low}, got {value!r}')
+    return value
+
+
+def effects_from(spec) -> EffectsConfig:
+    """The emulator's effects from a mapping or the path of a YAML file; written out in full,
+    so the settings beside the results say what the emulated reality did."""
+    if isinstance(spec, str):
+        return EffectsConfig.load(spec)
+    return EffectsConfig.from_dict(spec, 'reality.effects')
+
+
+def _typed(cls, data: dict, name: str):
+    try:
+        return cls(**data[name])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name}: {exc}') from None
+
+
+def _level(spec, groups, distribution: str, index: int) -> Level:
+    where = f'levels[{index}]'
+    if not isinstance(spec, dict) or set(spec) != {'label', 'figure', *MODELS}:
+        raise ValueError(f"{where} must have exactly the keys label, figure, combination "
+                         f"({{dependent, independent}}) and independent (a level), got {spec!r}")
+    combo = spec['combination']
+    if not isinstance(combo, dict) or set(combo) != {'dependent', 'independent'}:
+        raise ValueError(f'{where}.combination must be {{dependent: d, independent: i}}, '
+                         f'got {combo!r}')
+    label, figure = str(spec['label']), str(spec['figure'])
+    try:
+        noises = (NoiseModel('combination', combo['dependent'], combo['independent'],
+                             groups, distribution),
+                  NoiseModel('independent', 0.0, spec['independent'], groups, distribution))
+    except ValueError as exc:
+        raise ValueError(f'{where} ({label}): {exc}') from None
+    return Level(label, figure, tuple(Condition(label, m, n) for m, n in zip(MODELS, noises)))

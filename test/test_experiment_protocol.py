@@ -1,0 +1,221 @@
+"""Steps 1-5 at a tiny scale, in process: structure, seeding, batching and resuming."""
+import numpy as np
+import pytest
+
+from khepera_noise_ros.core.evaluation import CoreEvaluator
+from khepera_noise_ros.experiment import config as settings
+from khepera_noise_ros.core.evolution import SteadyStateEA
+from khepera_noise_ros.experiment.protocol import STEPS, Backends, ConditionEpisodes, \
+    Experiment, chunked, chunked_trace, core_simulate, episodes_per_run, per_condition, play, \
+    seed_for
+from khepera_noise_ros.experiment.store import Store
+from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots
+from khepera_noise_ros.reality.world import EmulatedWorld
+
+TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 3},
+        'phase2': {'population': 3, 'generations': 2}, 'task': {'steps': 12},
+        'reality': {'robots': 8}, 'backend': {'simulation': 'core', 'reality': 'world'}}
+
+
+def tiny(**changes) -> settings.ReplicateConfig:
+    return settings.load(overrides=settings.merge(TINY, changes, 'test')
+                         if changes else TINY)
+
+
+class Spy:
+    """Wraps an evaluator and remembers every batch it was given."""
+
+    def __init__(self, evaluate):
+        self.evaluate, self.batches = evaluate, []
+
+    def __call__(self, genomes, seeds):
+        self.batches.append((np.array(genomes), np.array(seeds)))
+        return self.evaluate(genomes, seeds)
+
+    @property
+    def episodes(self) -> int:
+        return sum(len(s) for _, s in self.batches)
+
+
+def backends(config, reality_spy=True, simulate=None, traced=False) -> Backends:
+    """The core simulator and the emulated world in process, as ``--backend core``."""
+    world = EmulatedWorld(config.effects, seed=config.reality['seed'],
+                          robots=config.reality['robots'], geometry=config.world)
+    robots = KheperaRobots(InProcessRobots(world), config.world, config.task)
+    capacity = config.reality['robots']
+    reality = chunked(lambda g, s: play(robots, g, s)[0], capacity)
+    trace = chunked_trace(lambda g, s: play(robots, g, s)[1], capacity) if traced else None
+    noise = {c.key: c.noise for c in config.conditions}
+    return Backends(simulate or core_simulate(noise, config.world, config.task),
+                    Spy(reality) if reality_spy else reality, trace)
+
+
+def run(config, tmp_path, name='out', **kw) -> tuple[Store, Experiment]:
+    store = Store(tmp_path / name, config.hash)
+    store.open(config.to_yaml())
+    experiment = Experiment(config, kw.pop('backends', None) or backends(config), store, **kw)
+    experiment.run()
+    return store, experiment
+
+
+def scores(store, config) -> dict:
+    return {(c.key, t, s): store.load(c.key, t, s) for c in config.conditions
+            for t in range(config.trials) for s in STEPS}
+
+
+def test_every_trial_goes_through_the_five_steps_in_order(tmp_path):
+    config = tiny()
+    store, experiment = run(config, tmp_path)
+    units = scores(store, config)
+    assert all(u is not None for u in units.values())
+    for c in config.conditions:
+        for t in range(config.trials):
+            u = {s: units[c.key, t, s] for s in STEPS}
+            assert [u[s]['world'] for s in STEPS] == ['simulation'] * 2 + ['reality'] * 3
+            best1, best4 = u[1]['best_genome'], u[4]['best_genome']
+            assert u[2]['genome'] == best1 and u[3]['genome'] == best1
+            assert u[4]['seed_genome'] == best1                 # phase 2 starts from phase 1
+            assert u[5]['genome'] == best4
+            assert u[2]['seeds'] == u[3]['seeds'] == u[5]['seeds']  # the same test episodes
+            assert len(u[3]['fitness']) == config.test_episodes
+            assert u[1]['evaluations'] == episodes_per_run(config.phase1) == 4 + 3 * 4
+            assert len(u[1]['history']) == config.phase1.generations + 1
+            assert 0 <= u[1]['best_generation'] <= config.phase1.generations
+            assert all(0.0 <= f <= 1.0 for s in (2, 3, 5) for f in u[s]['fitness'])
+    # the reality evaluator ran exactly steps 3, 4 and 5, all conditions in each batch
+    spy = experiment.backends.reality
+    units_n = len(config.conditions) * config.trials
+    assert spy.episodes == units_n * (2 * config.test_episodes + episodes_per_run(config.phase2))
+    step3_genomes = spy.batches[0][0]
+    assert [g.tolist() for g in step3_genomes[::config.test_episodes]] == \
+        [units[c.key, t, 1]['best_genome'] for c in config.conditions
+         for t in range(config.trials)]
+    assert experiment.episodes_left() == {'simulation': 0, 'reality': 0}
+
+
+def test_real_tests_record_each_step_and_score_as_untraced(tmp_path):
+    config = tiny()
+    plain, _ = run(config, tmp_path, 'plain')
+    store, experiment = run(config, tmp_path, 'traced',
+                            backends=backends(config, reality_spy=False, traced=True))
+    assert scores(store, config).keys() == scores(plain, config).keys()
+    for key, unit in scores(store, config).items():
+        assert unit['fitness' if key[2] in (2, 3, 5) else 'best_fitness'] == \
+            scores(plain, config)[key]['fitness' if key[2] in (2, 3, 5) else 'best_fitness']
+        if key[2] in (3, 5):
+            steps = np.array(unit['step_fitness'])
+            assert steps.shape == (config.test_episodes, config.task.steps)
+            assert unit['fitness'] == pytest.approx(steps.mean(axis=1).tolist(), abs=1e-6)
+
+
+def test_a_trial_does_not_depend_on_what_else_is_in_its_batch(tmp_path):
+    two, three = tiny(), tiny(trials=3)
+    a, _ = run(two, tmp_path, 'two')
+    b, _ = run(three, tmp_path, 'three')
+    for c in two.conditions:
+        for t in range(2):
+            for s in (1, 2):        # simulation: per-episode seeds, whatever the batch
+                assert a.load(c.key, t, s)['history' if s == 1 else 'fitness'] == \
+                    b.load(c.key, t, s)['history' if s == 1 else 'fitness']
+
+
+def test_one_batch_for_all_conditions_equals_one_evaluator_each():
+    config = tiny()
+    noise = {c.key: c.noise for c in config.conditions}
+    rng = np.random.default_rng(1)
+    requests = {k: (rng.uniform(-2, 2, (n, 20)), rng.integers(0, 2**40, n))
+                for k, n in zip(noise, (3, 1, 4, 2))}
+    together = core_simulate(noise, config.world, config.task)(requests)
+    apart = per_condition({k: CoreEvaluator(config.world, m, config.task)
+                           for k, m in noise.items()})(requests)
+    assert together.keys() == apart.keys()
+    for k in noise:
+        assert np.array_equal(together[k], apart[k])
+    episodes = ConditionEpisodes(noise, config.world, config.task)
+    with pytest.raises(KeyError):
+        episodes.lay_out({'no-such-condition': 2})
+
+
+class Interrupt:
+    """Evaluates normally, then raises KeyboardInterrupt at the n-th call (Ctrl-C)."""
+
+    def __init__(self, simulate, at: int):
+        self.simulate, self.at, self.calls = simulate, at, 0
+
+    def __call__(self, requests):
+        self.calls += 1
+        if self.calls == self.at:
+            raise KeyboardInterrupt
+        return self.simulate(requests)
+
+
+def rounds_in(ea: SteadyStateEA, told: list[float]) -> int:
+    """How many ask/tell rounds the logged values fill on a fresh EA, exactly."""
+    rounds = used = 0
+    while used < len(told):
+        size = len(ea.ask()[1])
+        assert 0 < size <= len(told) - used, 'the log ends inside a round'
+        ea.tell(told[used:used + size])
+        used, rounds = used + size, rounds + 1
+    return rounds
+
+
+def test_an_interrupted_run_resumes_without_recomputing(tmp_path):
+    config = tiny()
+    noise = {c.key: c.noise for c in config.conditions}
+    simulate = core_simulate(noise, config.world, config.task)
+    whole_count = Interrupt(simulate, at=0)
+    whole, _ = run(config, tmp_path, 'whole', backends=backends(config, simulate=whole_count))
+    phase1_rounds = whole_count.calls - 1             # then one call for step 2
+    cut = phase1_rounds // 2
+    assert cut >= 2
+    stopping = Interrupt(simulate, at=cut + 1)        # mid phase 1
+    with pytest.raises(KeyboardInterrupt):
+        run(config, tmp_path, 'cut', backends=backends(config, simulate=stopping),
+            checkpoint_s=1e9)                     # checkpoints written on the way out
+    store = Store(tmp_path / 'cut', config.hash)
+    units = [(c, t) for c in config.conditions for t in range(config.trials)]
+    assert all(store.load(c.key, t, 1) is None for c, t in units)
+    told = {(c.key, t): store.load_checkpoint(c.key, t, 1) for c, t in units}
+    for (key, t), values in told.items():       # exactly the rounds that were answered
+        ea = SteadyStateEA(config.phase1, seed=seed_for(config.seed, key, t, 'phase1'))
+        assert rounds_in(ea, values) == cut
+    left = Experiment(config, backends(config), store).episodes_left()
+    per_run = episodes_per_run(config.phase1)
+    assert left == {'simulation': sum(per_run - len(v) + config.test_episodes
+                                      for v in told.values()),
+                    'reality': len(units) * (2 + episodes_per_run(config.phase2) + 2)}
+    counting = Interrupt(simulate, at=0)
+    resumed, experiment = run(config, tmp_path, 'cut', backends=backends(config,
+                                                                         simulate=counting))
+    assert counting.calls == phase1_rounds - cut + 1   # the rounds left of phase 1, step 2
+    assert scores(resumed, config) == scores(whole, config)
+    assert experiment.episodes_left() == {'simulation': 0, 'reality': 0}
+
+
+def test_an_interruption_in_reality_resumes_mid_phase_2(tmp_path):
+    config = tiny()
+    real = backends(config, reality_spy=False)
+    calls = {'n': 0}
+
+    def stopping(genomes, seeds):
+        calls['n'] += 1
+        if calls['n'] == 4:                       # step 3, then rounds 0-1 of phase 2
+            raise KeyboardInterrupt
+        return real.reality(genomes, seeds)
+
+    with pytest.raises(KeyboardInterrupt):
+        run(config, tmp_path, backends=Backends(real.simulate, stopping, real.reality_trace),
+            checkpoint_s=1e9)
+    store = Store(tmp_path / 'out', config.hash)
+    told = store.load_checkpoint(config.conditions[0].key, 0, 4)
+    best = store.load(config.conditions[0].key, 0, 1)['best_genome']
+    ea = SteadyStateEA(config.phase2, seed=seed_for(config.seed, config.conditions[0].key, 0,
+                                                    'phase2'), seed_genome=best)
+    assert rounds_in(ea, told) == 2               # the seeded population, one round
+    left = sum(episodes_per_run(config.phase2) - len(store.load_checkpoint(c.key, t, 4))
+               + config.test_episodes for c in config.conditions for t in range(config.trials))
+    again = backends(config)
+    _, experiment = run(config, tmp_path, backends=again)
+    assert again.reality.episodes == left
+    assert store.load(config.conditions[0].key, 0, 5) is not None
