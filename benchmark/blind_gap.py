@@ -1,0 +1,416 @@
+"""Blind benchmark of the sim-to-real gap diagnosis (prints figures; not a test).
+
+    python benchmark/blind_gap.py [--cases 40] [--seed 0] [--transfer N] [--out FILE.json]
+    python benchmark/blind_gap.py --record EFFECTS_YAML --to DIR [--seed 0]
+
+Each case draws one effect of the vocabulary (or none) at a random location and
+strength and sets it in the emulated robot (``reality.EmulatedWorld``), which
+then records a stationary and a closed-loop recording, as an experimenter
+would: the stationary one at fixed headings in five lighting conditions, the
+closed-loop one running an evolved controller on the light-centring task, with
+the heading unknown (a real robot does not know it).  The diagnosis
+(``gap.diagnose``) gets only the two recordings and the simulator's
+configuration; the case's settings stay in this script, which at the end
+compares them with the answers: a confusion matrix of the top effect, how often
+the location was right when the effect was, and the held-out shrink.
+
+The simulator's configuration is the paper's independent model at the
+emulator's own sensor-noise level (2%), so ``none`` means no gap.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault('OMP_NUM_THREADS', '1')
+
+import numpy as np  # noqa: E402
+
+from khepera_noise_ros.core import evolution, network  # noqa: E402
+from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
+from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
+from khepera_noise_ros.core.task import Task  # noqa: E402
+from khepera_noise_ros.gap import diagnose, transfer  # noqa: E402
+from khepera_noise_ros.gap.effects import VOCABULARY  # noqa: E402
+from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
+from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.reality import effects as emu  # noqa: E402
+from khepera_noise_ros.reality.world import CONDITIONS, EmulatedWorld  # noqa: E402
+from khepera_noise_ros.recording import FORMAT, Recording  # noqa: E402
+
+SENSOR_NOISE = 0.02
+# The lamp on each sensor's axis in turn (sensor angles), in an order that lights and
+# darkens every sensor several times, so that a clip or a slow sensor shows on each.
+SWEEP = (10, -90, 45, -170, -10, 90, -45, 170)
+STATIONARY = {'task': SWEEP, 'bulb_1ft': SWEEP, 'bulb_2ft': SWEEP, 'room_dark': (0,),
+              'room_fluorescent': (0,)}
+SAMPLES, REPEATS, SETTLE = 60, 2, 5
+CLOSED_LOOP_EPISODES = 30
+RING = (0, 1, 2, 3, 4, 5, 6, 7)          # sensors in order around the body: adjacent pairs
+
+
+# --- the robot ----------------------------------------------------------------------
+
+class PaperSensorNoise(emu.SensorNoise):
+    """Sensor noise with getnoise's truncation toward zero, as the paper's C code does."""
+
+    def apply(self, level, z, rows):
+        from scipy.special import ndtr
+        u = ndtr(z[:, emu.SENSOR_DRAWS])
+        return level + np.trunc((2.0 * u - 1.0) * self.level * level)
+
+
+def _truncates() -> bool:
+    probe = emu.SensorNoise(0.02).apply(np.full((1, 8), 50.3), np.full((1, emu.DRAWS), 0.8),
+                                        np.array([0]))
+    return bool(np.allclose(probe - 50.3, np.round(probe - 50.3)))
+
+
+def robot(config: emu.EffectsConfig, seed: int, robots: int = 1) -> EmulatedWorld:
+    """The emulated robot(s); their own noise made the paper's getnoise if it is not.
+
+    The emulator's sensor noise is uniform +-2% of the reading, rounded; the paper's
+    getnoise truncates toward zero.  With rounding the simulator's noise is 8-45% less
+    spread than the robot's (most at bright readings), a real gap the benchmark's
+    ``none`` cases must not contain, so the benchmark's robot truncates as the paper does.
+    """
+    world = EmulatedWorld(config, seed=seed, robots=robots)
+    if not _truncates():
+        chain = world._chain.chain          # the emulator has no setting for this
+        for i, process in enumerate(chain):
+            if type(process) is emu.SensorNoise:
+                chain[i] = PaperSensorNoise(process.level)
+    return world
+
+
+def _manifest(protocol: str, conditions, genome=None) -> dict:
+    m = {'format': FORMAT, 'source': 'emulator', 'sample_period_s': 1.0, 'protocol': protocol,
+         'conditions': {c: dataclasses.asdict(CONDITIONS[c]) for c in conditions}}
+    if genome is not None:
+        m['genome'] = [float(g) for g in genome]
+    return m
+
+
+def record_stationary(world: EmulatedWorld, plan=STATIONARY, samples=SAMPLES,
+                      repeats=REPEATS, settle=SETTLE) -> Recording:
+    """Readings at fixed headings.  An episode is one condition: the lamp is set, the
+    sensors settle, then the robot is turned from heading to heading and read
+    ``samples`` times at each, without a pause (so a slow sensor shows)."""
+    rows, episode = [], 0
+    for _ in range(repeats):
+        for condition, headings in plan.items():
+            world.set_condition(condition)
+            world.set_bearing(headings[0])
+            for _ in range(settle):
+                world.read(0)
+            t = 0
+            for heading in headings:
+                world.set_bearing(heading)
+                for _ in range(samples):
+                    rows.append((episode, t, heading, condition, world.read(0)))
+                    t += 1
+            episode += 1
+    return _recording(rows, _manifest('stationary', plan))
+
+
+def record_closed_loop(world: EmulatedWorld, genome, condition='task',
+                       episodes=CLOSED_LOOP_EPISODES, task=Task(), seed=0) -> Recording:
+    """The task on the robot as the hardware bridge runs it (``KheperaRobots``: knocks
+    made by the wheels every ``perturb_every`` steps); headings are not recorded, as a
+    real robot does not know them.  The experimenter faces the robot to the lamp before
+    each episode."""
+    weights = network.unpack(np.asarray(genome)[None])
+    robots = KheperaRobots(InProcessRobots(world), CONDITIONS[condition].world(), task)
+    seeds = np.random.SeedSequence(seed).generate_state(episodes, np.uint32)
+    rows = []
+    for e, episode_seed in enumerate(seeds):
+        readings = robots.reset([int(episode_seed)], bearing_deg=0.0)
+        t = 0
+        while readings is not None:
+            direction, power = network.act(weights, readings.astype(np.float32))
+            rows.append((e, t, math.nan, condition, readings[:, 0].copy(), int(direction[0]),
+                         int(power[0])))
+            readings = robots.step(direction, power)
+            t += 1
+    return _recording(rows, _manifest('closed_loop', [condition], genome))
+
+
+def _recording(rows, manifest) -> Recording:
+    n = len(rows)
+    turns = [r[5:] if len(r) > 5 else (math.nan, math.nan) for r in rows]
+    return Recording(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                     np.array([r[2] for r in rows], float), np.array([r[3] for r in rows]),
+                     np.array([r[4] for r in rows], float).reshape(n, 8),
+                     np.array([t[0] for t in turns], float),
+                     np.array([t[1] for t in turns], float), manifest)
+
+
+# --- the cases ----------------------------------------------------------------------
+
+def _arc(rng, low: int, high: int) -> tuple:
+    """Adjacent sensors around the body, ``low``..``high`` of them."""
+    size = int(rng.integers(low, high + 1))
+    start = int(rng.integers(0, 8))
+    return tuple(sorted(RING[(start + i) % 8] for i in range(size)))
+
+
+def draw_case(rng) -> tuple[str, emu.EffectsConfig, dict]:
+    """(effect name, emulator configuration, truth: location and settings)."""
+    name = VOCABULARY[int(rng.integers(0, len(VOCABULARY)))]
+    base = emu.EffectsConfig.none(SENSOR_NOISE)
+    if name == 'none':
+        return name, base, {'location': None}
+    if name == 'correlated_noise':
+        first = _arc(rng, 2, 4)
+        groups = [first]
+        if rng.random() < 0.5:
+            rest = [s for s in RING if s not in first]
+            start = rest.index(min(rest, key=lambda s: (s - max(first)) % 8))
+            size = int(rng.integers(2, 4))
+            second = tuple(sorted(rest[start:start + size]))
+            if len(second) >= 2 and all((b - a) % 8 == 1 or (a, b) == (0, 7) for a, b in
+                                        zip(second, second[1:])):
+                groups.append(second)
+        settings = {'strength': float(rng.uniform(0.01, 0.03)), 'location': tuple(groups)}
+        truth = {'location': sorted(map(list, groups))}
+    elif name == 'intensity_dependent_noise':
+        location = _arc(rng, 3, 8)
+        settings = {'strength': float(rng.uniform(0.02, 0.06)),
+                    'exponent': float(rng.uniform(1.0, 3.0)), 'location': location}
+        truth = {'location': list(location)}
+    elif name == 'sensor_gain_offset':
+        location = tuple(sorted(rng.choice(8, size=int(rng.integers(1, 4)), replace=False)))
+        gains, offsets = [1.0] * 8, [0.0] * 8
+        for s in location:
+            gains[s] = 1.0 + float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.2))
+            offsets[s] = float(rng.uniform(-10, 10))
+        settings = {'gains': tuple(gains), 'offsets': tuple(offsets),
+                    'location': tuple(int(s) for s in location)}
+        truth = {'location': [int(s) for s in location]}
+    elif name == 'temporal_drift':
+        location = RING if rng.random() < 0.5 else _arc(rng, 2, 6)
+        settings = {'strength': float(rng.uniform(0.006, 0.02)),
+                    'time_constant': float(rng.uniform(10, 80)),
+                    'shared': bool(rng.random() < 0.5), 'location': tuple(location)}
+        truth = {'location': list(location)}
+    elif name == 'actuator_turn_error':
+        scale = rng.uniform(0.6, 0.85) if rng.random() < 0.5 else rng.uniform(1.15, 1.4)
+        settings = {'scale': float(scale), 'strength': float(rng.uniform(0.0, 0.3))}
+        truth = {'location': None}
+    elif name == 'sensor_latency':
+        location = RING if rng.random() < 0.5 else _arc(rng, 2, 6)
+        settings = {'strength': int(rng.integers(1, 3)), 'location': tuple(location)}
+        truth = {'location': list(location)}
+    else:
+        location = _arc(rng, 1, 4)
+        kind = rng.choice(['high', 'low', 'step', 'high+step'])
+        settings = {'location': location, 'strength': 1.0}
+        if 'high' in kind:
+            settings['high'] = float(rng.uniform(380, 480))
+        if kind == 'low':
+            settings['low'] = float(rng.uniform(60, 120))
+        if 'step' in kind:
+            settings['strength'] = float(rng.choice([3, 4, 5, 8]))
+        truth = {'location': list(location), 'kind': str(kind)}
+    truth['settings'] = {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()}
+    return name, base.only(name, **{name: settings}), truth
+
+
+def effective_location(config: emu.EffectsConfig, seed: int, recorded: Recording) -> list:
+    """The sensors whose stationary readings the effect changed: the same robot, seed and
+    protocol without the effect (the emulator's draws do not depend on which effects are
+    on) differs from the recording exactly where the effect acted."""
+    plain = record_stationary(robot(emu.EffectsConfig.none(SENSOR_NOISE), seed))
+    return [int(s) for s in np.flatnonzero((plain.readings != recorded.readings).any(axis=0))]
+
+
+def located(name: str, truth: dict, answer: dict | None, key: str = 'effective') -> bool:
+    """Did the diagnosis name the right sensors (or groups)?  ``key`` chooses the truth:
+    'effective' (sensors whose data changed) or 'location' (the emulator's setting)."""
+    if truth['location'] is None:
+        return True
+    if answer is None:
+        return False
+    if name == 'correlated_noise':
+        groups = answer['parameters'].get('groups', [])
+        return sorted(map(sorted, groups)) == sorted(map(sorted, truth['location']))
+    return sorted(answer['sensors']) == sorted(truth[key])
+
+
+# --- reality for the transfer experiment ----------------------------------------------
+
+def reality(config: emu.EffectsConfig, seed: int, condition: str = 'task'):
+    """(genomes, seeds) -> fitness on emulated robots of ``config``: the robots the
+    benchmark recorded from, one per genome."""
+    from khepera_noise_ros.reality.world import CONDITIONS as conditions
+    world = conditions[condition].world()
+
+    def evaluate(genomes, seeds):
+        bodies = robot(config, seed, len(seeds))
+        env = KheperaRobots(InProcessRobots(bodies), world, Task())
+        try:
+            return transfer.fitness(env, genomes, seeds)
+        finally:
+            env.close()
+    return evaluate
+
+
+# --- the run ------------------------------------------------------------------------
+
+def evolved_genome(seed: int) -> np.ndarray:
+    """The controller the closed-loop recordings run: evolved in the simulator."""
+    evaluate = CoreEvaluator(noise=NoiseModel.independent_only(SENSOR_NOISE))
+    eas = [evolution.SteadyStateEA(evolution.EAConfig(population=25, generations=30), s)
+           for s in np.random.SeedSequence(seed).generate_state(4)]
+    evolution.evolve(eas, evaluate)
+    return max(eas, key=lambda e: e.best_fitness).best_genome
+
+
+TRANSFER_ANSWERS = ('actuator_turn_error', 'sensor_latency')   # effects that act in the loop
+TRANSFER_EA = evolution.EAConfig(population=15, generations=20)
+
+
+def run_case(k: int, rng, genome, options, transfer_trials: int) -> dict:
+    name, config, truth = draw_case(rng)
+    seed = int(rng.integers(0, 2 ** 31))
+    world = robot(config, seed)
+    t0 = time.perf_counter()
+    recordings = [record_stationary(world), record_closed_loop(world, genome, seed=seed)]
+    record_s = time.perf_counter() - t0
+    if truth['location'] is not None:
+        truth['effective'] = effective_location(config, seed, recordings[0])
+    t0 = time.perf_counter()
+    result = diagnose.diagnose(recordings, dataclasses.replace(options, seed=k))
+    answer = next((e for e in result.effects if e['name'] == result.top_effect), None)
+    diagnose_s = time.perf_counter() - t0
+    if transfer_trials and result.top_effect in TRANSFER_ANSWERS:
+        from khepera_noise_ros.reality.world import CONDITIONS as conditions
+        result.transfer = transfer.run(options.config, conditions['task'].world(),
+                                       [result.fitted], reality(config, seed + 1),
+                                       transfer_trials, TRANSFER_EA, seed=k)
+    return {'case': k, 'truth': name, 'truth_detail': truth, 'answer': result.top_effect,
+            'correct': result.top_effect == name,
+            'located': result.top_effect == name and located(name, truth, answer),
+            'located_setting': result.top_effect == name and located(name, truth, answer,
+                                                                     'location'),
+            'answer_sensors': answer['sensors'] if answer else [],
+            'answer_parameters': answer['parameters'] if answer else {},
+            'shrink': answer['heldout_reduction'] if answer else None,
+            'gap_significant': result.gap_significant, 'transfer': result.transfer,
+            'record_s': record_s, 'diagnose_s': diagnose_s}
+
+
+def confusion(rows: list[dict]) -> str:
+    names = list(VOCABULARY)
+    short = {n: ''.join(w[0] for w in n.split('_')) for n in names}
+    lines = ['truth \\ answer'.ljust(28) + ''.join(short[n].rjust(5) for n in names)]
+    for t in names:
+        counts = [sum(1 for r in rows if r['truth'] == t and r['answer'] == a) for a in names]
+        lines.append(t.ljust(28) + ''.join(str(c).rjust(5) for c in counts))
+    lines.append('columns: ' + ', '.join(f'{short[n]} = {n}' for n in names))
+    return '\n'.join(lines)
+
+
+def summary(rows: list[dict], seconds: float) -> dict:
+    correct = [r for r in rows if r['correct']]
+    effect_rows = [r for r in rows if r['truth'] != 'none']
+    shrink_all = [r['shrink'] if r['correct'] else 0.0 for r in effect_rows]
+    shrink_correct = [r['shrink'] for r in effect_rows if r['correct']]
+    transfers = [r for r in rows if r['transfer']]
+    return {
+        'cases': len(rows), 'top1': len(correct) / len(rows),
+        'located': sum(r['located'] for r in correct) / max(1, len(correct)),
+        'located_setting': sum(r['located_setting'] for r in correct) / max(1, len(correct)),
+        'median_shrink_effect_cases': float(np.median(shrink_all)) if shrink_all else None,
+        'median_shrink_correct': float(np.median(shrink_correct)) if shrink_correct else None,
+        'transfer_cases': len(transfers),
+        'transfer_gap_before': [r['transfer']['fitness_gap_before'] for r in transfers],
+        'transfer_gap_after': [r['transfer']['fitness_gap_after'] for r in transfers],
+        'transfer_p': [r['transfer']['gap_p'] for r in transfers],
+        'seconds': seconds, 'seconds_per_case': seconds / len(rows),
+    }
+
+
+def record_only(effects: Path, out: Path, seed: int) -> int:
+    """Record the benchmark's two protocols from an emulator, for the commands to read."""
+    from khepera_noise_ros.recording import write_csv
+    world = robot(emu.EffectsConfig.load(effects), seed)
+    genome = evolved_genome(seed)
+    for name, rec in (('stationary', record_stationary(world)),
+                      ('closed_loop', record_closed_loop(world, genome, seed=seed))):
+        for path in write_csv(rec, out / name):
+            print(f'wrote {path}')
+    params = out / 'simulator.yaml'
+    params.write_text('simulator:\n  ros__parameters:\n    noise_model: independent\n'
+                      f'    independent_level: {SENSOR_NOISE}\n')
+    print(f'wrote {params}')
+    return 0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--cases', type=int, default=40)
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--transfer', type=int, default=0, metavar='N',
+                   help='re-run the transfer experiment in the first N cases answered '
+                        + ' or '.join(TRANSFER_ANSWERS))
+    p.add_argument('--transfer-trials', type=int, default=5)
+    p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
+    p.add_argument('--record', type=Path, metavar='EFFECTS_YAML',
+                   help='instead: record the protocol from the emulator of this effects '
+                        'file into --to (stationary and closed_loop CSV + YAML)')
+    p.add_argument('--to', type=Path, default=Path('results/recordings'))
+    args = p.parse_args(argv)
+    if args.record:
+        return record_only(args.record, args.to, args.seed)
+    started = time.perf_counter()
+    rng = np.random.default_rng(args.seed)
+    genome = evolved_genome(args.seed)
+    config = SimConfig(noise=NoiseModel.independent_only(SENSOR_NOISE))
+    options = diagnose.Options(config=config)
+    rows = []
+    for k in range(args.cases):
+        transfer_trials = args.transfer_trials if sum(bool(r['transfer']) for r in rows) \
+            < args.transfer else 0
+        row = run_case(k, rng, genome, options, transfer_trials)
+        rows.append(row)
+        mark = 'ok ' if row['correct'] else 'XX '
+        where = '' if row['located'] or not row['correct'] else (
+            f" wrong location {row['answer_sensors']} (changed: "
+            f"{row['truth_detail'].get('effective')}, set: {row['truth_detail']['location']})")
+        shrink = '' if row['shrink'] is None else f" shrink {row['shrink']:.2f}"
+        print(f"{mark}case {k:3d} {row['truth']:26s} -> {row['answer']:26s}{shrink}{where} "
+              f"({row['diagnose_s']:.1f} s)", flush=True)
+    seconds = time.perf_counter() - started
+    s = summary(rows, seconds)
+    print()
+    print(confusion(rows))
+    print()
+    print(f"cases {s['cases']}, top-1 {s['top1']:.0%}, location right in {s['located']:.0%} "
+          f"of correct answers ({s['located_setting']:.0%} against the emulator's location "
+          f"setting), median held-out shrink {s['median_shrink_effect_cases']:.2f} "
+          f"over effect cases ({s['median_shrink_correct']:.2f} over correct ones), "
+          f"{seconds:.0f} s ({s['seconds_per_case']:.1f} s per case)")
+    for r in rows:
+        if r['transfer']:
+            t = r['transfer']
+            print(f"transfer case {r['case']} ({r['truth']} -> {r['answer']}): fitness gap "
+                  f"{t['fitness_gap_before']:.3f} -> {t['fitness_gap_after']:.3f} "
+                  f"(Welch p = {t['gap_p'] if t['gap_p'] is None else round(t['gap_p'], 3)}), "
+                  f"real fitness {t['real_fitness_before']:.3f} -> "
+                  f"{t['real_fitness_after']:.3f}, {t['trials']} trials")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({'summary': s, 'cases': rows}, indent=1,
+                                       default=float))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

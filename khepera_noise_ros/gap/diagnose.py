@@ -1,0 +1,266 @@
+"""The diagnosis: where the gap lies, which unmodelled effect causes it, how far it shrinks.
+
+1. Where: every statistic of the real recordings against the simulator's replay
+   of the same protocol (``gap.where``), ranked by standardised difference.
+2. Which: the recordings are split (``gap.split``); each effect of the
+   vocabulary is located and fitted on one part (``gap.fit``), added to the
+   simulator, and scored on the other part by the fraction of the discrepancy
+   it removes.  The effects are ranked by that held-out reduction.
+3. How far: the discrepancy before and after the top effect on held-out data,
+   with a bootstrap interval; for closed-loop data, optionally the transfer
+   experiment (``gap.transfer``).
+
+The verdict is ``none`` when no statistic differs significantly (the gap is
+not significant) or when no effect removes a significant share of it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..recording import Recording
+from . import effects as fx
+from . import fit, replay, split, transfer
+from .simconfig import SimConfig
+from .target import Target
+from .where import ALPHA, Comparison, entries, localise
+
+FORMAT = 'khepera-noise-diagnosis/1'
+MIN_REDUCTION = 0.25       # an explanation must remove at least this share of the gap
+REDUCTION_ALPHA = 0.05     # ... and do so in 95% of the bootstrap replicates
+MIN_SAMPLES = 40
+# Free parameters of each effect's model, beyond its location: when two effects explain
+# the held-out data equally well, the one with fewer wins (correlated noise is the
+# paper's model; intensity-dependent noise with a flat exponent is the same thing).
+TIE = 0.10
+PARAMETERS = {'sensor_latency': 1, 'correlated_noise': 1, 'actuator_turn_error': 2,
+              'intensity_dependent_noise': 2, 'temporal_drift': 3,
+              'saturation_quantization': 3, 'sensor_gain_offset': 4}
+
+
+@dataclass
+class Options:
+    config: SimConfig = field(default_factory=SimConfig)
+    seed: int = 0
+    base: str = 'auto'
+    held_out: tuple = ()          # conditions held out of the fit; () = alternate episodes
+    alpha: float = ALPHA                        # family-wise, for "is there a gap"
+    reduction_alpha: float = REDUCTION_ALPHA    # one-sided, for "does the effect shrink it"
+    min_reduction: float = MIN_REDUCTION
+    replicates: int = 200
+    effects: tuple = fx.NAMES
+    where_limit: int = 40
+
+
+@dataclass
+class Diagnosis:
+    where: list
+    localisation: dict
+    effects: list
+    top_effect: str
+    fitted: object | None            # the top effect, ready for the simulator
+    gap_significant: bool
+    notes: list
+    full: Comparison                 # real against simulated, all data
+    held_out_before: Comparison | None = None
+    held_out_after: Comparison | None = None
+    transfer: dict | None = None
+    inputs: list = field(default_factory=list)
+    combined: dict | None = None     # the top two effects together, when both count
+
+    def to_json(self) -> dict:
+        transfer = self.transfer or {'fitness_gap_before': None, 'fitness_gap_after': None,
+                                     'trials': 0}
+        return {'format': FORMAT, 'where': self.where, 'effects': self.effects,
+                'top_effect': self.top_effect, 'transfer': transfer,
+                'gap_significant': self.gap_significant, 'combined': self.combined,
+                'localisation': self.localisation,
+                'notes': self.notes, 'inputs': self.inputs}
+
+
+def check(recordings: list[Recording]) -> None:
+    """Refuse input the diagnosis cannot make sense of, saying what is wrong."""
+    if not recordings:
+        raise ValueError('the diagnosis needs at least one recording')
+    for i, rec in enumerate(recordings):
+        rec.check()
+        if len(rec) < MIN_SAMPLES:
+            raise ValueError(f'recording {_name(rec, i)} has {len(rec)} samples; the '
+                             f'diagnosis needs at least {MIN_SAMPLES}')
+    layouts = {(r.channels, tuple(r.channels_used)) for r in recordings}
+    if len(layouts) > 1:
+        described = '; '.join(f'{_name(r, i)}: {r.channels} channels, using '
+                              f'{r.channels_used}' for i, r in enumerate(recordings))
+        raise ValueError(f'the recordings disagree on their light channels ({described}); '
+                         f'diagnose recordings of one robot together')
+    for i, rec in enumerate(recordings):
+        if replay.kind(rec) == 'stationary' and not _varies(rec):
+            raise ValueError(f'recording {_name(rec, i)} has no variation: every used channel '
+                             f'is constant at every heading, so its noise cannot be compared '
+                             f'(a disconnected or stuck sensor?)')
+        if replay.kind(rec) == 'closed_loop':
+            replay.genome_of(rec)
+
+
+def _varies(rec: Recording) -> bool:
+    used = rec.readings[:, rec.channels_used]
+    for run in replay.runs(rec):
+        if np.ptp(used[run], axis=0).max() > 0:
+            return True
+    return False
+
+
+def _name(rec: Recording, i: int) -> str:
+    return str(rec.manifest.get('name', f'#{i + 1}'))
+
+
+def diagnose(recordings: list[Recording], options: Options = Options(), reality=None,
+             transfer_trials: int = 0, transfer_ea=None) -> Diagnosis:
+    """Diagnose the gap between ``recordings`` and the simulator of ``options.config``."""
+    check(recordings)
+    o = options
+    notes = _base_notes(recordings, o.base)
+    full = Target(recordings, o.config, o.seed, o.base, replicates=o.replicates)
+    c_full = full.compare()
+    significant = bool(c_full.significant(o.alpha).any())
+    result = Diagnosis(entries(c_full, o.where_limit, o.alpha), localise(c_full, o.alpha), [],
+                       'none', None, significant, notes, c_full,
+                       inputs=[_describe(r) for r in recordings])
+    if not significant:
+        notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
+                     f'from the simulator at family-wise alpha {o.alpha} (Holm)')
+    if o.held_out:
+        split.check_conditions(recordings, o.held_out)
+    fit_part, test_part = split.split(recordings, o.held_out)
+    if not fit_part or not test_part:
+        notes.append('cannot tell which effect: the data cannot be split into a part to fit '
+                     'and a part held out')
+        return result
+    a, b = (Target([r for _, r in part], o.config, o.seed + k, o.base,
+                   replicates=o.replicates, block_lengths=[full.block_lengths[i]
+                                                           for i, _ in part])
+            for k, part in ((1, fit_part), (2, test_part)))
+    candidates = fit.fit_all(a, a.compare(), o.effects)
+    result.held_out_before = b.compare()
+    d_before = result.held_out_before.discrepancy
+    before_reps = b.replicate_discrepancies(result.held_out_before)
+    scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
+    scored.sort(key=lambda s: -s[0]['heldout_reduction'])
+    scored = _parsimonious(scored, o.alpha)
+    result.effects = [s[0] for s in scored]
+    best, best_cmp, best_effect, _ = scored[0] if scored else (None, None, None, None)
+    if significant and best is not None and best_effect is not None:
+        if best['heldout_reduction'] >= o.min_reduction and \
+                best['p_value'] < o.reduction_alpha:
+            result.top_effect, result.fitted = best['name'], best_effect
+            result.held_out_after = best_cmp
+            result.combined = _combined(b, scored, d_before, o)
+        else:
+            notes.append(f'no effect explains a significant part of the gap: the best, '
+                         f'{best["name"]}, removes {best["heldout_reduction"]:.0%} of the '
+                         f'held-out discrepancy, p = {best["p_value"]:.3f} (needs '
+                         f'{o.min_reduction:.0%}, p < {o.reduction_alpha})')
+    if result.fitted is not None and reality is not None and transfer_trials:
+        result.transfer = _transfer(recordings, o, result.fitted, reality, transfer_trials,
+                                    transfer_ea)
+    return result
+
+
+def _parsimonious(scored: list, alpha: float) -> list:
+    """Move the simplest effect first among those that explain the held-out data as well as
+    the best: a held-out discrepancy left within ``TIE`` (relative) of the best's, or
+    not beaten significantly (the best's discrepancy lower in 1 - alpha of the bootstrap
+    replicates, paired: the same resampled real data against both)."""
+    if len(scored) < 2 or scored[0][3] is None:
+        return scored
+    best = scored[0]
+    left = best[0]['discrepancy_after']
+    rivals = [s for s in scored[1:] if s[3] is not None
+              and PARAMETERS[s[0]['name']] < PARAMETERS[best[0]['name']]
+              and (s[0]['discrepancy_after'] <= (1 + TIE) * left
+                   or np.mean(best[3] < s[3]) < 1 - alpha)]
+    if not rivals:
+        return scored
+    simplest = min(rivals, key=lambda s: (PARAMETERS[s[0]['name']],
+                                          -s[0]['heldout_reduction']))
+    simplest[0]['note'] += (f'; ranked first: explains the held-out data as well as '
+                            f'{best[0]["name"]} with fewer parameters')
+    return [simplest] + [s for s in scored if s is not simplest]
+
+
+def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Options):
+    """(effects entry, held-out comparison, effect, replicate discrepancies after)."""
+    entry = {'name': cand.name, 'sensors': [], 'parameters': {},
+             'discrepancy_before': d_before, 'discrepancy_after': d_before,
+             'heldout_reduction': 0.0, 'reduction_interval': [0.0, 0.0], 'p_value': 1.0,
+             'note': cand.note}
+    if cand.effect is None or d_before <= 0:
+        return entry, None, cand.effect, None
+    after = b.compare([cand.effect])
+    after_reps = b.replicate_discrepancies(after)
+    reduction = 1.0 - after.discrepancy / d_before
+    # Resampling adds noise to both discrepancies, which biases the replicates' reduction
+    # down; shifting them to the estimate's median gives a bias-corrected interval.
+    reps = 1.0 - after_reps / np.maximum(before_reps, 1e-9)
+    reps += reduction - np.median(reps)
+    entry.update({
+        'sensors': list(cand.effect.sensors), 'parameters': _parameters(cand.effect),
+        'discrepancy_after': after.discrepancy, 'heldout_reduction': reduction,
+        'reduction_interval': [float(np.quantile(reps, 0.025)),
+                               float(np.quantile(reps, 0.975))],
+        'p_value': float((np.sum(reps <= 0) + 1) / (reps.size + 1))})
+    return entry, after, cand.effect, after_reps
+
+
+def _combined(b: Target, scored: list, d_before: float, o: Options) -> dict | None:
+    """The top two effects added together, when the second also removes a share alone."""
+    if len(scored) < 2 or scored[1][2] is None or \
+            scored[1][0]['heldout_reduction'] < o.min_reduction:
+        return None
+    pair = [scored[0][2], scored[1][2]]
+    after = b.compare(pair).discrepancy
+    return {'effects': [e.name for e in pair], 'discrepancy_before': d_before,
+            'discrepancy_after': after, 'heldout_reduction': 1.0 - after / d_before}
+
+
+def _parameters(effect) -> dict:
+    params = fx.parameters(effect)
+    if effect.name == fx.CorrelatedNoise.name:
+        params['groups'] = effect.location
+    return params
+
+
+def _base_notes(recordings, requested: str) -> list[str]:
+    notes = []
+    for i, rec in enumerate(recordings):
+        if replay.kind(rec) == 'stationary':
+            mode, why = replay.base_mode(rec, requested)
+            if mode == 'observed':
+                notes.append(f'recording {_name(rec, i)}: simulated base values are the '
+                             f'recording\'s own means ({why}); levels and sensor_gain_offset '
+                             f'are not assessed')
+    kinds = {replay.kind(r) for r in recordings}
+    if 'closed_loop' not in kinds:
+        notes.append('no closed-loop recording: actuator_turn_error (and latency in turns) '
+                     'cannot be assessed')
+    return notes
+
+
+def _describe(rec: Recording) -> dict:
+    return {'protocol': replay.kind(rec), 'samples': len(rec),
+            'episodes': int(np.unique(rec.episode).size), 'conditions': rec.conditions(),
+            'channels': rec.channels, 'channels_used': rec.channels_used,
+            'source': rec.manifest.get('source')}
+
+
+def _transfer(recordings, o: Options, effect, reality, trials: int, ea) -> dict | None:
+    loops = [r for r in recordings if replay.kind(r) == 'closed_loop']
+    if not loops:
+        return None
+    label = loops[0].conditions()[0]
+    world = replay.condition_world(loops[0], label, o.config.world)
+    kw = {} if ea is None else {'ea': ea}
+    out = transfer.run(o.config, world, [effect], reality, trials, seed=o.seed, **kw)
+    out['condition'] = label
+    return out

@@ -1,0 +1,313 @@
+"""Simulator-side models of the unmodelled effects, one per name of DESIGN.md's vocabulary.
+
+Each effect is a small physical process the simulator can add to the paper's
+model.  Light-stage effects change the light level a sensor sees before the
+model's noise is drawn (calibration, drift, flicker, shared group noise); the
+reading stage acts on the noisy reading (latency, then the converter); the
+turn stage changes a commanded rotation.  An effect's ``process(robots,
+channels, rng)`` starts a fresh state for a batch of episodes.  Arrays are
+(channels, robots), as in the core.
+
+Effects are written to the simulator's ``effects`` parameter as a JSON list
+(``dumps``/``loads``), so the fitted effect travels in the params YAML.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ..core.khepera import DARK
+
+NAMES = ('correlated_noise', 'intensity_dependent_noise', 'sensor_gain_offset',
+         'temporal_drift', 'actuator_turn_error', 'sensor_latency', 'saturation_quantization')
+VOCABULARY = NAMES + ('none',)
+
+
+def _rows(sensors, channels: int) -> list[int]:
+    bad = [s for s in sensors if not 0 <= s < channels]
+    if bad:
+        raise ValueError(f'effect names sensors {bad}; the data has channels 0..{channels - 1}')
+    return list(sensors)
+
+
+@dataclass(frozen=True)
+class SensorGainOffset:
+    """Per-sensor calibration: reading = anchor - gain * (anchor - ideal) + offset."""
+
+    name: ClassVar[str] = 'sensor_gain_offset'
+    stage: ClassVar[str] = 'light'
+    sensors: tuple = ()
+    gains: tuple = ()
+    offsets: tuple = ()
+    anchor: float = DARK
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+        g = np.ones((channels, 1))
+        o = np.zeros((channels, 1))
+        g[rows, 0], o[rows, 0] = self.gains, self.offsets
+        return lambda level: self.anchor - g * (self.anchor - level) + o
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
+@dataclass(frozen=True)
+class TemporalDrift:
+    """Slow AR(1) wander of the sensors' gain: sd ``sd`` (a fraction), correlation time
+    ``time_constant`` samples, one wander for all ``sensors`` if ``shared``."""
+
+    name: ClassVar[str] = 'temporal_drift'
+    stage: ClassVar[str] = 'light'
+    sensors: tuple = ()
+    sd: float = 0.01
+    time_constant: float = 30.0
+    shared: bool = True
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+        a = float(np.exp(-1.0 / self.time_constant))
+        width = 1 if self.shared else len(rows)
+        state = self.sd * rng.standard_normal((width, robots))
+
+        def apply(level):
+            nonlocal state
+            out = level.copy()
+            out[rows] *= 1.0 + state
+            state = a * state + np.sqrt(1 - a * a) * self.sd * rng.standard_normal(state.shape)
+            return out
+        return apply
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
+@dataclass(frozen=True)
+class IntensityDependentNoise:
+    """A flicker all ``sensors`` see at once, larger the darker the reading:
+    reading += z * strength * r * (r / scale) ** exponent, z ~ N(0, 1) shared."""
+
+    name: ClassVar[str] = 'intensity_dependent_noise'
+    stage: ClassVar[str] = 'light'
+    sensors: tuple = ()
+    strength: float = 0.03
+    exponent: float = 1.0
+    scale: float = DARK
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+
+        def apply(level):
+            out = level.copy()
+            r = np.clip(level[rows], 0.0, None)
+            out[rows] += rng.standard_normal(robots) * self.strength * r \
+                * (r / self.scale) ** self.exponent
+            return out
+        return apply
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
+@dataclass(frozen=True)
+class CorrelatedNoise:
+    """Normal noise shared within each group, sd ``strength`` x the group's mean level."""
+
+    name: ClassVar[str] = 'correlated_noise'
+    stage: ClassVar[str] = 'light'
+    groups: tuple = ()
+    strength: float = 0.01
+
+    def process(self, robots: int, channels: int, rng):
+        groups = [_rows(g, channels) for g in self.groups]
+
+        def apply(level):
+            out = level.copy()
+            z = rng.standard_normal((len(groups), robots))
+            for g, members in enumerate(groups):
+                out[members] += self.strength * level[members].mean(axis=0) * z[g]
+            return out
+        return apply
+
+    @property
+    def location(self) -> list:
+        return [list(g) for g in self.groups]
+
+    @property
+    def sensors(self) -> tuple:
+        return tuple(sorted(s for g in self.groups for s in g))
+
+
+@dataclass(frozen=True)
+class SensorLatency:
+    """The ``sensors`` report the reading of ``steps`` samples ago (the first repeats)."""
+
+    name: ClassVar[str] = 'sensor_latency'
+    stage: ClassVar[str] = 'reading'
+    sensors: tuple = ()
+    steps: int = 1
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+        past: list = []
+
+        def apply(level):
+            past.append(level[rows].copy())
+            out = level.copy()
+            out[rows] = past[max(0, len(past) - 1 - self.steps)]
+            del past[:-self.steps - 1]
+            return out
+        return apply
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
+@dataclass(frozen=True)
+class SaturationQuantization:
+    """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high]."""
+
+    name: ClassVar[str] = 'saturation_quantization'
+    stage: ClassVar[str] = 'reading'
+    sensors: tuple = ()
+    low: float = 0.0
+    high: float = DARK
+    step: float = 1.0
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+
+        def apply(level):
+            out = level.copy()
+            out[rows] = np.clip(np.round(level[rows] / self.step) * self.step, self.low,
+                                self.high)
+            return out
+        return apply
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
+@dataclass(frozen=True)
+class ActuatorTurnError:
+    """A commanded rotation of x degrees turns x * scale + slip * |x| * N(0, 1) degrees.
+
+    With ``knocks`` the task's heading knocks are scaled too: on a real robot (the
+    hardware bridge) the knocks are turns made by the same wheels.
+    """
+
+    name: ClassVar[str] = 'actuator_turn_error'
+    stage: ClassVar[str] = 'turn'
+    scale: float = 1.0
+    slip: float = 0.0
+    knocks: bool = True
+
+    def process(self, robots: int, channels: int, rng):
+        return lambda deg: deg * self.scale + self.slip * np.abs(deg) \
+            * rng.standard_normal(np.shape(deg))
+
+    @property
+    def location(self) -> list:
+        return []
+
+    @property
+    def sensors(self) -> tuple:
+        return ()
+
+
+TYPES = {cls.name: cls for cls in (CorrelatedNoise, IntensityDependentNoise, SensorGainOffset,
+                                   TemporalDrift, ActuatorTurnError, SensorLatency,
+                                   SaturationQuantization)}
+
+
+def parameters(effect) -> dict:
+    """The effect's fields as plain JSON values, without the location."""
+    skip = {'sensors', 'groups'}
+    return {f.name: _plain(getattr(effect, f.name)) for f in dataclasses.fields(effect)
+            if f.name not in skip}
+
+
+def to_dict(effect) -> dict:
+    out = {'name': effect.name}
+    out.update({f.name: _plain(getattr(effect, f.name)) for f in dataclasses.fields(effect)})
+    return out
+
+
+def from_dict(data: dict):
+    """An effect from its dict form; a ValueError names what is wrong."""
+    if not isinstance(data, dict) or data.get('name') not in TYPES:
+        raise ValueError(f'an effect needs a name from {list(TYPES)}, got {data!r}')
+    cls = TYPES[data['name']]
+    allowed = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - allowed - {'name'})
+    if unknown:
+        raise ValueError(f'effect {data["name"]}: unknown field(s) {unknown}; allowed: '
+                         f'{sorted(allowed)}')
+    values = {k: _tuple(v) for k, v in data.items() if k != 'name'}
+    effect = cls(**values)
+    _check(effect)
+    return effect
+
+
+def _check(effect) -> None:
+    location = getattr(effect, 'groups', None) or [getattr(effect, 'sensors', ())]
+    for g in location:
+        if any(not isinstance(s, int) or s < 0 for s in g):
+            raise ValueError(f'effect {effect.name}: sensors must be indices >= 0, got {g!r}')
+    numbers = [v for v in parameters(effect).values() if isinstance(v, (int, float))]
+    if not all(np.isfinite(numbers)):
+        raise ValueError(f'effect {effect.name}: parameters must be finite, '
+                         f'got {parameters(effect)}')
+    if effect.name == 'sensor_latency' and effect.steps < 0:
+        raise ValueError(f'sensor_latency steps must be >= 0, got {effect.steps}')
+    if effect.name == 'saturation_quantization' and (effect.step <= 0 or
+                                                     effect.low >= effect.high):
+        raise ValueError(f'saturation_quantization needs step > 0 and low < high, got '
+                         f'{parameters(effect)}')
+    if effect.name == 'temporal_drift' and effect.time_constant <= 0:
+        raise ValueError(f'temporal_drift time_constant must be > 0, got '
+                         f'{effect.time_constant}')
+    if effect.name == 'sensor_gain_offset' and not \
+            len(effect.sensors) == len(effect.gains) == len(effect.offsets):
+        raise ValueError('sensor_gain_offset needs one gain and one offset per sensor')
+
+
+def _plain(value):
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _tuple(value):
+    if isinstance(value, list):
+        return tuple(_tuple(v) for v in value)
+    return value
+
+
+def dumps(effects) -> str:
+    """The simulator's ``effects`` parameter: a JSON list ('' for none)."""
+    return json.dumps([to_dict(e) for e in effects]) if effects else ''
+
+
+def loads(text: str) -> tuple:
+    if not text.strip():
+        return ()
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f'effects must be a JSON list of effects, got {text[:60]!r} '
+                         f'({exc.msg})') from None
+    if not isinstance(data, list):
+        raise ValueError(f'effects must be a JSON list, got {type(data).__name__}')
+    return tuple(from_dict(d) for d in data)

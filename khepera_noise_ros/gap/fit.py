@@ -1,0 +1,398 @@
+"""Fitting each candidate effect, location first, to one part of the real data.
+
+Every fitter looks at the comparison of that part (real against the plain
+simulator) for the fingerprint its effect leaves, picks the sensors or groups
+that carry it, takes first estimates of the parameters from moments, and then
+refines them by minimising the simulator-with-effect's discrepancy (common
+random numbers, so a handful of evaluations suffice).  A fitter that finds no
+fingerprint, or has no data that could show one, returns no effect and says why.
+
+Fingerprints (what the statistics of ``gap.statistics`` show):
+  sensor_gain_offset         per-sensor levels off, linearly in the level
+  saturation_quantization    readings piled up at a limit the simulator exceeds; a value grid
+  correlated_noise           pairs more correlated than simulated (clustered into groups)
+  intensity_dependent_noise  extra shared spread that grows steeply with the level
+  temporal_drift             extra autocorrelation; level offsets no fixed calibration makes
+  sensor_latency             a step response that lags; turn responses moved to lag 1
+  actuator_turn_error        the readings' response to a turn command scaled or blurred
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as sps
+from scipy.optimize import minimize
+
+from ..recording import reading_range
+from . import effects as fx
+from .groups import cluster, excess_evidence
+from .statistics import STEP_LAGS
+from .target import Target
+from .where import ALPHA, Comparison, holm
+
+Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
+ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
+
+
+@dataclass
+class Candidate:
+    name: str
+    effect: object | None     # None: nothing to add (see ``note``)
+    note: str
+
+
+def _rows(c: Comparison, family: str):
+    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
+            if k.family == family]
+
+
+def _channels(target: Target) -> list[int]:
+    return list(target.recordings[0].channels_used)
+
+
+def _golden(f, lo: float, hi: float, evaluations: int) -> float:
+    """Minimiser of f on [lo, hi] by golden-section search."""
+    g = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(max(0, evaluations - 2)):
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+    return c if fc <= fd else d
+
+
+# --- sensor_gain_offset ----------------------------------------------------------------
+
+def gain_offset(target: Target, c: Comparison) -> Candidate:
+    name = fx.SensorGainOffset.name
+    rows = _rows(c, 'level')
+    if not rows or target.base == 'observed':
+        return Candidate(name, None, 'no levels from the light model to compare')
+    sensors = sorted({k.sensors[0] for k, *_ in rows})
+    chi = {s: sum(z * z for k, *_, z in rows if k.sensors[0] == s) for s in sensors}
+    dof = {s: sum(1 for k, *_ in rows if k.sensors[0] == s) for s in sensors}
+    p = holm(np.array([sps.chi2.sf(chi[s], dof[s]) for s in sensors]))
+    located = [s for s, ps in zip(sensors, p) if ps < ALPHA]
+    if not located:
+        return Candidate(name, None, 'no sensor\'s levels differ significantly')
+    gains, offsets = [], []
+    for s in located:
+        real = np.array([r for k, r, *_ in rows if k.sensors[0] == s])
+        sim = np.array([m for k, _, m, *_ in rows if k.sensors[0] == s])
+        g, a = np.polyfit(sim, real, 1) if np.ptp(sim) > 1 else (1.0, real.mean() - sim.mean())
+        gains.append(round(float(g), 4))
+        offsets.append(round(float(a - ANCHOR * (1 - g)), 2))
+    effect = fx.SensorGainOffset(tuple(located), tuple(gains), tuple(offsets), ANCHOR)
+    return Candidate(name, effect, f'levels of {_names(located)} off the light model')
+
+
+# --- saturation_quantization -----------------------------------------------------------
+
+def saturation(target: Target, c: Comparison) -> Candidate:
+    name = fx.SaturationQuantization.name
+    grid_flag = {k.sensors[0] for k, r, s, se, z in _rows(c, 'granularity') if z > Z_DETECT}
+    real = np.concatenate([r.readings for r in target.recordings])
+    sim = np.concatenate([r.readings for r in target.simulate()])
+    rec = target.recordings[0]
+    low, high, grid = {}, {}, {}
+    for sensor in rec.channels_used:
+        x, y = real[:, sensor], sim[:, sensor]
+        x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+        ends = _clipped_ends(x, y, reading_range(rec.manifest, rec.channels))
+        if ends[0] is not None:
+            low[sensor] = ends[0]
+        if ends[1] is not None:
+            high[sensor] = ends[1]
+        step = _grid(x[(x > x.min()) & (x < x.max())])
+        if step > 1 and sensor in grid_flag:
+            grid[sensor] = step
+    if not (low or high or grid):
+        return Candidate(name, None, 'no readings held at a limit and no coarse value grid')
+    steps = list(grid.values())
+    step = float(max(set(steps), key=steps.count)) if steps else 1.0
+    options = []
+    for use_low in ([False, True] if low else [False]):
+        for use_high in ([False, True] if high else [False]):
+            sensors = set(grid) | (set(low) if use_low else set()) | \
+                (set(high) if use_high else set())
+            if sensors:
+                options.append(fx.SaturationQuantization(
+                    tuple(sorted(sensors)),
+                    low=float(np.median(list(low.values()))) if use_low else 0.0,
+                    high=float(np.median(list(high.values()))) if use_high else ANCHOR,
+                    step=step))
+    effect = min(options, key=lambda e: target.objective([e], ('stationary',)))
+    what = [w for w, found in (('clipped below', effect.low > 0),
+                               ('clipped above', effect.high < ANCHOR),
+                               ('on a grid', effect.step > 1)) if found]
+    return Candidate(name, effect, f'{_names(effect.sensors)} {" and ".join(what)}')
+
+
+def _clipped_ends(real: np.ndarray, sim: np.ndarray, limits) -> tuple:
+    """(low, high) where a sensor's readings are held at a limit: they pile up on their
+    extreme value (0.5% of them, and twice as many as on the next value in), while 0.5%
+    of the simulated ones lie beyond it.  Merely narrower noise has no pile-up; a limit
+    of the reading range itself is modelled and does not count."""
+    values, counts = np.unique(real, return_counts=True)
+    if values.size < 2:
+        return None, None
+    out = []
+    for i, j, beyond, limit in ((0, 1, sim < values[0], limits[0]),
+                                (-1, -2, sim > values[-1], limits[1])):
+        held = counts[i] >= 0.005 * real.size and counts[i] >= 2 * counts[j] \
+            and np.mean(beyond) >= 0.005 and values[i] != limit
+        out.append(float(values[i]) if held else None)
+    return tuple(out)
+
+
+def _grid(x: np.ndarray) -> int:
+    """The coarsest step (2..32) on which nearly all integer readings ``x`` lie, else 1."""
+    if x.size < 20 or not np.all(x == np.round(x)):
+        return 1
+    for q in range(32, 1, -1):
+        if np.bincount(np.mod(x, q).astype(np.int64)).max() >= 0.95 * x.size:
+            return q
+    return 1
+
+
+# --- correlated_noise ------------------------------------------------------------------
+
+def correlated(target: Target, c: Comparison) -> Candidate:
+    name = fx.CorrelatedNoise.name
+    channels = _channels(target)
+    evidence, _ = excess_evidence(c, channels)
+    groups = [tuple(channels[i] for i in g) for g in cluster(evidence)]
+    if not groups:
+        return Candidate(name, None, 'no sensors whose noise is more correlated than simulated')
+    start = _shared_strength(c, groups)
+    effect = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), s), start)
+    return Candidate(name, effect, f'excess correlation clusters into {_groups(groups)}')
+
+
+def _shared_strength(c: Comparison, groups) -> float:
+    """Moment estimate of shared noise sd as a fraction of the level: excess covariance
+    within the groups over the mean squared level."""
+    level, spread = _by_condition(c, 'level'), _by_condition(c, 'spread')
+    num = den = 0.0
+    for k, r, s, *_ in _rows(c, 'correlation'):
+        for g in groups:
+            if set(k.sensors) <= set(g):
+                a, b = k.sensors
+                sr = [spread[k.condition][x][0] for x in (a, b)]
+                ss = [spread[k.condition][x][1] for x in (a, b)]
+                num += r * sr[0] * sr[1] - s * ss[0] * ss[1]
+                den += np.mean([level[k.condition][x][1] for x in g]) ** 2
+    return float(np.sqrt(max(num, 0.0) / den)) if den > 0 and num > 0 else 0.01
+
+
+def _by_condition(c: Comparison, family: str) -> dict:
+    """{condition: {sensor: (rms real, rms simulated)}} over a family's cells."""
+    acc: dict = {}
+    for k, r, s, *_ in _rows(c, family):
+        acc.setdefault(k.condition, {}).setdefault(k.sensors[0], []).append((r, s))
+    return {cond: {sensor: tuple(np.sqrt(np.mean(np.square(v), axis=0)))
+                   for sensor, v in by.items()} for cond, by in acc.items()}
+
+
+def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
+    """The effect ``make(x)`` with x refined on a log scale around ``start``."""
+    lo, hi = math.log(start / 3), math.log(start * 3)
+    best = _golden(lambda u: target.objective([make(math.exp(u))], kinds), lo, hi,
+                   evaluations)
+    return make(round(math.exp(best), 5))
+
+
+# --- intensity_dependent_noise ---------------------------------------------------------
+
+def intensity(target: Target, c: Comparison) -> Candidate:
+    name = fx.IntensityDependentNoise.name
+    channels = _channels(target)
+    evidence, _ = excess_evidence(c, channels)
+    clusters = cluster(evidence)
+    if clusters:
+        best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
+        sensors = tuple(channels[i] for i in best)
+    else:
+        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
+                                if z > Z_DETECT}))
+    if not sensors:
+        return Candidate(name, None, 'no extra spread or shared noise to explain')
+    cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
+             for s in [_level(c, k)] if s is not None]
+    best_fit = None
+    for exponent in (0.0, 1.0, 2.0, 3.0):
+        strength = _flicker_strength(cells, exponent)
+        effect = fx.IntensityDependentNoise(sensors, strength, exponent)
+        d = target.objective([effect])
+        if best_fit is None or d < best_fit[0]:
+            best_fit = (d, exponent, strength)
+    _, exponent, strength = best_fit
+    effect = _refine(target, lambda s: fx.IntensityDependentNoise(sensors, s, exponent),
+                     strength, evaluations=5)
+    return Candidate(name, effect, f'extra spread on {_names(sensors)} growing with the level')
+
+
+def _level(c: Comparison, key) -> float | None:
+    for k, r, s, *_ in _rows(c, 'level'):
+        if k.sensors == key.sensors and k.condition == key.condition and k.part == key.part:
+            return s
+    return None
+
+
+def _flicker_strength(cells, exponent: float) -> float:
+    """Moment estimate: excess variance = (strength * L * (L / 525) ** exponent) ** 2."""
+    num = sum(max(v, 0.0) for L, v in cells)
+    den = sum((L * (L / ANCHOR) ** exponent) ** 2 for L, v in cells)
+    return float(np.sqrt(num / den)) if den > 0 and num > 0 else 0.01
+
+
+# --- temporal_drift --------------------------------------------------------------------
+
+def drift(target: Target, c: Comparison) -> Candidate:
+    name = fx.TemporalDrift.name
+    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')]
+    sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
+    if not sensors:
+        return Candidate(name, None, 'no extra autocorrelation over time and no level '
+                                     'offsets beyond a fixed calibration')
+    channels = _channels(target)
+    evidence, _ = excess_evidence(c, channels)
+    idx = [channels.index(s) for s in sensors]
+    shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
+        > Z_DETECT
+    rho = {lag: np.mean([r - s for k, r, s, z in acf
+                         if k.sensors[0] in sensors and k.part == f'lag {lag}'])
+           for lag in (1, 3)}
+    a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
+    tau0 = -1.0 / math.log(a)
+    spread = _by_condition(c, 'spread')
+    level = _by_condition(c, 'level')
+    ratio = [spread[cond][s][0] / level[cond][s][1] for cond in spread for s in sensors
+             if level.get(cond, {}).get(s, (0, 0))[1] > 0]
+    sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
+
+    def make(x, shared=shared):
+        return fx.TemporalDrift(sensors, round(math.exp(x[0]), 5), round(math.exp(x[1]), 2),
+                                bool(shared))
+    result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
+                      method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
+                          [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
+                          [math.log(sd0), math.log(tau0 * 2.0)]]})
+    effect = make(result.x)
+    if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
+        other = make(result.x, not shared)
+        if target.objective([other]) < result.fun:
+            effect = other
+    kind = 'one shared wander' if effect.shared else 'a wander per sensor'
+    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind})')
+
+
+def _unexplained_levels(c: Comparison) -> tuple:
+    """Sensors whose levels stay off after the best fixed gain and offset: run-to-run
+    offsets a calibration cannot make (chi-square of the line's residuals, Holm)."""
+    rows = _rows(c, 'level')
+    sensors = sorted({k.sensors[0] for k, *_ in rows})
+    p = []
+    for sensor in sensors:
+        real, sim, se = (np.array(v) for v in zip(*[(r, m, e) for k, r, m, e, z in rows
+                                                    if k.sensors[0] == sensor]))
+        if real.size < 4 or np.ptp(sim) < 1:
+            p.append(1.0)
+            continue
+        line = np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim)
+        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), real.size - 2)))
+    adjusted = holm(np.array(p)) if p else np.array([])
+    return tuple(s for s, q in zip(sensors, adjusted) if q < ALPHA)
+
+
+def _combined_excess(rows) -> tuple:
+    """Sensors whose statistics lie above the simulation taken together (Stouffer's z over
+    conditions and lags, Holm over sensors)."""
+    by: dict = {}
+    for k, r, s, z in rows:
+        by.setdefault(k.sensors[0], []).append(z)
+    sensors = sorted(by)
+    z = np.array([np.sum(by[s]) / np.sqrt(len(by[s])) for s in sensors])
+    p = holm(sps.norm.sf(z))
+    return tuple(s for s, ps in zip(sensors, p) if ps < ALPHA)
+
+
+# --- sensor_latency --------------------------------------------------------------------
+
+def latency(target: Target, c: Comparison) -> Candidate:
+    name = fx.SensorLatency.name
+    steps = _rows(c, 'step_response')
+    first = [(k.sensors[0], r) for k, r, s, se, z in steps
+             if k.part.startswith('sample 0') and z > Z_DETECT]
+    if first:
+        sensors = tuple(sorted(s for s, _ in first))
+        lag = {}
+        for k, r, *_ in steps:
+            if k.sensors[0] in sensors:
+                lag[k.sensors[0]] = lag.get(k.sensors[0], 0.0) + float(np.clip(r, 0, 1))
+        delay = max(1, int(round(np.median(list(lag.values())))))
+        if delay >= STEP_LAGS:
+            delay = _best_delay(target, sensors, range(STEP_LAGS, STEP_LAGS + 4))
+        return Candidate(name, fx.SensorLatency(sensors, delay),
+                         f'step response of {_names(sensors)} lags {delay} sample(s)')
+    turned = {k.sensors[0] for k, r, s, se, z in _rows(c, 'sensor_turn_response')
+              if abs(z) > Z_DETECT}
+    if not turned:
+        return Candidate(name, None, 'readings follow heading changes at once')
+    sensors = tuple(sorted(turned))
+    delay = _best_delay(target, sensors, (1, 2, 3), kinds=('closed_loop',))
+    return Candidate(name, fx.SensorLatency(sensors, delay),
+                     f'turn responses of {_names(sensors)} delayed {delay} step(s)')
+
+
+def _best_delay(target: Target, sensors, delays, kinds=('stationary',)) -> int:
+    return min(delays, key=lambda d: target.objective([fx.SensorLatency(sensors, d)], kinds))
+
+
+# --- actuator_turn_error ---------------------------------------------------------------
+
+def actuator(target: Target, c: Comparison) -> Candidate:
+    name = fx.ActuatorTurnError.name
+    rows = [(r, s) for k, r, s, se, z in _rows(c, 'turn_response') if k.part == 'lag 0']
+    if not rows:
+        return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
+    if not any(abs(z) > Z_DETECT for family in ('turn_response', 'sensor_turn_response')
+               for *_, z in _rows(c, family)):
+        return Candidate(name, None, 'the readings respond to turns as simulated')
+    real, sim = np.mean(rows, axis=0)
+    scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
+
+    def objective(scale, slip):
+        return target.objective([fx.ActuatorTurnError(scale, slip)], ('closed_loop',))
+    scale = _golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
+    slip = min((0.0, 0.1, 0.2, 0.35), key=lambda x: objective(scale, x))
+    effect = fx.ActuatorTurnError(round(scale, 4), slip)
+    return Candidate(name, effect, f'turn response {real / sim:.2f} times the simulated'
+                     if abs(sim) > 1e-9 else 'turn response differs')
+
+
+FITTERS = {fx.SensorGainOffset.name: gain_offset, fx.SaturationQuantization.name: saturation,
+           fx.CorrelatedNoise.name: correlated, fx.IntensityDependentNoise.name: intensity,
+           fx.TemporalDrift.name: drift, fx.SensorLatency.name: latency,
+           fx.ActuatorTurnError.name: actuator}
+
+
+def fit_all(target: Target, c: Comparison, names=tuple(FITTERS)) -> list[Candidate]:
+    return [FITTERS[n](target, c) for n in names]
+
+
+def _names(sensors) -> str:
+    return ', '.join(f's{s}' for s in sensors)
+
+
+def _groups(groups) -> str:
+    return ' '.join('{' + _names(g) + '}' for g in groups)

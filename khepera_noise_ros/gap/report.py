@@ -1,0 +1,218 @@
+"""The diagnosis written out: diagnosis.json, report.md with figures, and fitted_params.yaml.
+
+Figures (PNG, matplotlib without a display):
+  correlation.png   real and simulated correlation matrices side by side, per condition
+  spread.png        spread against light level, every sensor and cell, real and simulated
+  shrink.png        held-out discrepancy per statistic family before and after the top effect
+  effects.png       held-out reduction of every candidate effect
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..files import atomic_write_text, write_json
+from . import simconfig
+from .diagnose import Diagnosis
+from .where import Comparison, MARGIN
+
+FIGURES = ('correlation.png', 'spread.png', 'shrink.png', 'effects.png')
+
+
+def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool = True) -> dict:
+    """Write every output into directory ``out``; returns {what: path}."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {'diagnosis': write_json(out / 'diagnosis.json', diagnosis.to_json())}
+    if diagnosis.fitted is not None:
+        paths['params'] = simconfig.write(
+            config.with_effects(diagnosis.fitted), out / 'fitted_params.yaml',
+            header=f'khepera-noise diagnose: the simulator with the fitted '
+                   f'{diagnosis.top_effect}\nload with: --ros-args --params-file '
+                   f'fitted_params.yaml')
+    drawn = draw(diagnosis, out) if figures else {}
+    paths.update(drawn)
+    paths['report'] = atomic_write_text(out / 'report.md', markdown(diagnosis, drawn, paths))
+    return paths
+
+
+# --- figures ---------------------------------------------------------------------------
+
+def draw(d: Diagnosis, out: Path) -> dict:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    drawn = {}
+    for name, painter in (('correlation', _correlation), ('spread', _spread),
+                          ('shrink', _shrink), ('effects', _effects)):
+        fig = painter(d, plt)
+        if fig is not None:
+            path = out / f'{name}.png'
+            fig.savefig(path, dpi=110, bbox_inches='tight')
+            plt.close(fig)
+            drawn[name] = path
+    return drawn
+
+
+def _family(c: Comparison, family: str):
+    return [(k, r, s) for k, r, s in zip(c.keys, c.real, c.sim) if k.family == family]
+
+
+def _correlation(d: Diagnosis, plt):
+    rows = _family(d.full, 'correlation')
+    if not rows:
+        return None
+    conditions = list(dict.fromkeys(k.condition for k, *_ in rows))[:4]
+    sensors = sorted({s for k, *_ in rows for s in k.sensors})
+    fig, axes = plt.subplots(len(conditions), 2, figsize=(6.4, 3.0 * len(conditions)),
+                             squeeze=False)
+    for i, cond in enumerate(conditions):
+        for j, side in enumerate(('real', 'simulated')):
+            m = np.eye(len(sensors))
+            for k, r, s in rows:
+                if k.condition == cond:
+                    a, b = (sensors.index(x) for x in k.sensors)
+                    m[a, b] = m[b, a] = r if j == 0 else s
+            ax = axes[i, j]
+            image = ax.imshow(m, vmin=-1, vmax=1, cmap='RdBu_r')
+            ax.set_title(f'{side}: {cond}', fontsize=9)
+            ax.set_xticks(range(len(sensors)), [f's{x}' for x in sensors], fontsize=7)
+            ax.set_yticks(range(len(sensors)), [f's{x}' for x in sensors], fontsize=7)
+    fig.colorbar(image, ax=axes, shrink=0.6, label='correlation of residuals')
+    return fig
+
+
+def _spread(d: Diagnosis, plt):
+    level = {(k.sensors, k.condition, k.part): (r, s) for k, r, s in _family(d.full, 'level')}
+    points = [(level[(k.sensors, k.condition, k.part)], (r, s))
+              for k, r, s in _family(d.full, 'spread')
+              if (k.sensors, k.condition, k.part) in level]
+    if not points:
+        return None
+    (lr, ls), (sr, ss) = (np.array(v).T for v in zip(*points))
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    ax.scatter(ls, ss, s=10, alpha=0.6, label='simulated')
+    ax.scatter(lr, sr, s=10, alpha=0.6, marker='x', label='real')
+    ax.set_xlabel('light level (reading; 0 bright, 525 dark)')
+    ax.set_ylabel('spread (sd of readings about the run mean)')
+    ax.set_title('Spread against light level, every sensor and cell')
+    ax.legend()
+    return fig
+
+
+def _family_discrepancy(c: Comparison) -> dict:
+    out: dict = {}
+    for k, z in zip(c.keys, c.z):
+        out[k.family] = out.get(k.family, 0.0) + max(abs(z) - MARGIN, 0.0) ** 2
+    return out
+
+
+def _shrink(d: Diagnosis, plt):
+    if d.held_out_before is None or d.held_out_after is None:
+        return None
+    before, after = _family_discrepancy(d.held_out_before), \
+        _family_discrepancy(d.held_out_after)
+    families = [f for f in sorted(before, key=lambda f: -before[f]) if before[f] > 0][:10]
+    if not families:
+        return None
+    x = np.arange(len(families))
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    ax.bar(x - 0.2, [before[f] for f in families], 0.4, label='simulator as configured')
+    ax.bar(x + 0.2, [after.get(f, 0.0) for f in families], 0.4,
+           label=f'with {d.top_effect}')
+    ax.set_yscale('symlog')
+    ax.set_xticks(x, families, rotation=35, ha='right', fontsize=8)
+    ax.set_ylabel('held-out discrepancy')
+    ax.set_title('Before and after the fitted effect, on held-out data')
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _effects(d: Diagnosis, plt):
+    if not d.effects:
+        return None
+    names = [e['name'] for e in d.effects]
+    values = [max(e['heldout_reduction'], -1.0) for e in d.effects]
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    ax.barh(names[::-1], values[::-1])
+    ax.axvline(0.25, color='grey', linestyle=':', label='needed to count')
+    ax.set_xlim(-1, 1)
+    ax.set_xlabel('share of the held-out discrepancy removed')
+    ax.legend(fontsize=8)
+    return fig
+
+
+# --- markdown --------------------------------------------------------------------------
+
+def markdown(d: Diagnosis, drawn: dict, paths: dict) -> str:
+    lines = ['# Sim-to-real gap diagnosis', '', f'**Top effect: `{d.top_effect}`**', '']
+    lines += [f'- {n}' for n in d.notes] + ([''] if d.notes else [])
+    lines += ['## Inputs', '']
+    for i, rec in enumerate(d.inputs):
+        lines.append(f"- recording {i + 1}: {rec['protocol']}, {rec['samples']} samples in "
+                     f"{rec['episodes']} episodes, conditions {', '.join(rec['conditions'])}, "
+                     f"{rec['channels']} channels (using {rec['channels_used']})")
+    lines += ['', '## 1. Where the gap lies', '',
+              'Largest standardised differences (z = difference / bootstrap standard error; '
+              'p Holm-adjusted over all statistics):', '',
+              '| statistic | sensors | condition | part | simulated | real | z | p |',
+              '| --- | --- | --- | --- | --- | --- | --- | --- |']
+    for e in d.where[:15]:
+        lines.append(f"| {e['statistic']} | {_sensors(e['sensors'])} | {e['condition'] or ''} "
+                     f"| {e['part'] or ''} | {e['sim']:.4g} | {e['real']:.4g} | "
+                     f"{e['significance']:.1f} | {e['p_value']:.2g} |")
+    loc = d.localisation
+    if loc.get('families'):
+        lines += ['', 'Share of the significant discrepancy by ' + '; '.join(
+            f"{what}: " + ', '.join(f'{k} {v:.0%}' for k, v in list(loc[what].items())[:6])
+            for what in ('families', 'sensors', 'pairs', 'conditions', 'parts') if loc[what])]
+    lines += ['', '## 2. Which effect', '',
+              '| effect | sensors | held-out reduction | 95% interval | p | parameters | '
+              'how located |', '| --- | --- | --- | --- | --- | --- | --- |']
+    for e in d.effects:
+        lo, hi = e['reduction_interval']
+        lines.append(f"| {e['name']} | {_sensors(e['sensors'])} | "
+                     f"{e['heldout_reduction']:.2f} | [{lo:.2f}, {hi:.2f}] | "
+                     f"{e['p_value']:.3f} | {_params(e['parameters'])} | {e['note']} |")
+    lines += ['', '## 3. How far it shrinks', '']
+    if d.fitted is not None:
+        top = d.effects[0]
+        lines.append(f"On held-out data the discrepancy goes from "
+                     f"{top['discrepancy_before']:.1f} to {top['discrepancy_after']:.1f} "
+                     f"({top['heldout_reduction']:.0%} removed).")
+        if d.combined:
+            c = d.combined
+            lines.append(f"With {' and '.join(c['effects'])} together: "
+                         f"{c['discrepancy_after']:.1f} ({c['heldout_reduction']:.0%} "
+                         f"removed).")
+    else:
+        lines.append('No effect was added.')
+    if d.transfer:
+        t = d.transfer
+        p = 'n/a' if t['gap_p'] is None else f"{t['gap_p']:.3g}"
+        lines += ['', f"Transfer experiment ({t['trials']} trials per arm, "
+                      f"{t['test_episodes']} test episodes each, condition {t['condition']}): "
+                      f"fitness gap (simulated minus real) {t['fitness_gap_before']:.3f} "
+                      f"before, {t['fitness_gap_after']:.3f} after ({t['test']}, p = {p}); "
+                      f"real fitness {t['real_fitness_before']:.3f} -> "
+                      f"{t['real_fitness_after']:.3f}."]
+    lines += ['', '## Figures', '']
+    for name, path in drawn.items():
+        lines.append(f'![{name}]({Path(path).name})')
+    lines += ['', '## Files', ''] + [f'- {k}: `{Path(v).name}`' for k, v in paths.items()]
+    return '\n'.join(lines) + '\n'
+
+
+def _sensors(sensors) -> str:
+    return ' '.join(f's{s}' for s in sensors)
+
+
+def _params(params: dict) -> str:
+    def short(v):
+        if isinstance(v, float):
+            return f'{v:.4g}'
+        if isinstance(v, list):
+            return '[' + ', '.join(short(x) for x in v) + ']'
+        return str(v)
+    return ', '.join(f'{k}={short(v)}' for k, v in params.items())

@@ -1,0 +1,147 @@
+"""The simulator with unmodelled effects added: closed-loop episodes and stationary samples.
+
+``EffectEpisodes`` is ``core.task.Episodes`` with the effects of ``gap.effects``
+in its sensing and turning; with no effects it gives exactly the core's
+episodes (same streams, same readings).  It is also the hook the simulator
+node needs to honour its ``effects`` parameter.  ``stationary`` samples fixed
+base values for any number of channels, for recordings of robots and boards the
+light model does not describe.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..core.khepera import DARK, SENSORS, TENTHS, World, to_tenths
+from ..core.noise import NoiseModel
+from ..core.task import Episodes, Task
+from ..core.streams import UNIT
+
+
+def _staged(effects, stage: str) -> list:
+    return [e for e in effects if e.stage == stage]
+
+
+def _entropy(seed) -> list[int]:
+    """Seed material for the effects' generator, distinct from the core's streams."""
+    return [int(s) for s in np.atleast_1d(np.asarray(seed, np.int64)).tolist()] + [0x6A9]
+
+
+class EffectEpisodes(Episodes):
+    """Core episodes plus effects; effects draw from their own generator seeded by ``seed``.
+
+    The core's own sensing runs unchanged: the effects ride in a wrapper around the
+    noise model (light stage before its noise, reading stage after), a turn's error
+    is added to the bearing before the core applies the commanded turn, and a turn
+    scale that also moves the knocks scales the task's perturbation.
+    """
+
+    def __init__(self, world: World = World(), noise: NoiseModel = NoiseModel(),
+                 task: Task = Task(), effects=()):
+        self.effects = tuple(effects)
+        self._light: list = []
+        self._reading: list = []
+        self._turning: list = []
+        super().__init__(world, noise, task)
+
+    @property
+    def task(self) -> Task:
+        """The task, its knocks scaled by the turn effects that move them (the wheels make
+        the knocks on a real robot); setting it sets the unscaled task."""
+        scale = np.prod([e.scale for e in _staged(self.effects, 'turn')
+                         if getattr(e, 'knocks', False)])
+        if scale == 1.0:
+            return self._task
+        return dataclasses.replace(self._task, perturbation_deg=float(
+            min(180.0, self._task.perturbation_deg * scale)))
+
+    @task.setter
+    def task(self, task: Task) -> None:
+        self._task = task
+
+    @property
+    def noise(self) -> 'EffectNoise':
+        return self._noise
+
+    @noise.setter
+    def noise(self, model) -> None:
+        """A new noise model keeps the effects (and their state) of the running episodes."""
+        model = getattr(model, 'model_noise', model)
+        self._noise = EffectNoise(model, self._light, self._reading)
+
+    def reset(self, seed, robots: int | None = None, bearing_deg=None) -> np.ndarray:
+        """Start episodes; the effects (``self.effects`` now) start afresh too."""
+        n = robots if robots is not None else np.size(seed)
+        rng = np.random.default_rng(_entropy(seed))
+        self._light = [e.process(n, SENSORS, rng) for e in _staged(self.effects, 'light')]
+        self._reading = [e.process(n, SENSORS, rng) for e in _staged(self.effects, 'reading')]
+        self._turning = [e.process(n, SENSORS, rng) for e in _staged(self.effects, 'turn')]
+        self.noise = self._noise
+        return super().reset(seed, robots, bearing_deg)
+
+    def step(self, direction, power) -> np.ndarray | None:
+        if self._turning and not self.done:
+            commanded = np.asarray(direction, np.float64) * np.asarray(power) \
+                * self.world.deg_per_power
+            actual = commanded
+            for turn in self._turning:
+                actual = turn(actual)
+            self._bearing = (self._bearing + to_tenths(actual - commanded)) % TENTHS
+        return super().step(direction, power)
+
+
+class EffectNoise:
+    """The model's noise with light-stage effects before it and reading-stage after.
+
+    Duck-types ``NoiseModel`` for ``Episodes``: every other attribute is the model's.
+    """
+
+    def __init__(self, model_noise: NoiseModel, light: list, reading: list):
+        self.model_noise = model_noise
+        self.light, self.reading = light, reading
+
+    def __getattr__(self, name):
+        return getattr(self.model_noise, name)
+
+    def apply(self, base, sensor_draws, group_draws, out=None) -> np.ndarray:
+        if not (self.light or self.reading):
+            return self.model_noise.apply(base, sensor_draws, group_draws, out=out)
+        readings = sense(np.asarray(base, np.float64), self.model_noise, sensor_draws,
+                         group_draws, self.light, self.reading).astype(np.float32)
+        if out is None:
+            return readings
+        out[...] = readings
+        return out
+
+
+def sense(base: np.ndarray, noise: NoiseModel, sensor_draws, group_draws, light: list,
+          reading: list) -> np.ndarray:
+    """Light-stage effects, the model's noise on the (integer) light level, reading stage."""
+    level = base
+    for apply in light:
+        level = apply(level)
+    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+    out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
+    for apply in reading:
+        out = apply(out)
+    return np.clip(np.rint(out), 0.0, DARK)
+
+
+def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -> np.ndarray:
+    """(samples, channels, units) readings of units whose light is ``base`` at each sample,
+    (samples, channels, units): each unit is one continuous run (effects keep their state).
+
+    The model's dependence groups must lie within the channels; effects may name any.
+    """
+    samples, channels, robots = base.shape
+    rng = np.random.default_rng(_entropy(seed))
+    light = [e.process(robots, channels, rng) for e in _staged(effects, 'light')]
+    reading = [e.process(robots, channels, rng) for e in _staged(effects, 'reading')]
+    groups = max(1, len(noise.groups))
+    draws = np.random.default_rng([int(seed), 0x5A7]).integers(
+        0, int(UNIT) + 1, size=(samples, channels + groups, robots), dtype=np.uint16)
+    out = np.empty((samples, channels, robots))
+    for t in range(samples):
+        out[t] = sense(base[t], noise, draws[t, :channels], draws[t, channels:], light, reading)
+    return out

@@ -1,0 +1,55 @@
+"""Splitting real recordings into a part to fit on and a part held out from the fit.
+
+By episode (the default): within each condition, alternate episodes go to the
+fit and to the hold-out; a condition with a single episode is cut in time
+instead, its first half fitted.  By condition: the named conditions are held
+out whole, so an effect fitted in some lighting is checked in another.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..recording import Recording
+
+
+def by_episode(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """(fit, held-out) boolean masks over the samples."""
+    fit = np.zeros(len(rec), bool)
+    for label in rec.conditions():
+        here = rec.condition == label
+        episodes = np.unique(rec.episode[here])
+        if episodes.size >= 2:
+            fit |= here & np.isin(rec.episode, episodes[::2])
+        else:
+            steps = rec.step[here]
+            fit[here] = steps <= np.median(steps)
+    return fit, ~fit
+
+
+def by_condition(rec: Recording, held_out) -> tuple[np.ndarray, np.ndarray]:
+    out = np.isin(rec.condition, list(held_out))
+    return ~out, out
+
+
+def split(recordings: list[Recording], held_out=None) -> tuple[list, list]:
+    """(fit, held-out): lists of (index of the source recording, part); a recording with no
+    samples on a side is left out of that side."""
+    fit, test = [], []
+    for i, rec in enumerate(recordings):
+        a, b = by_episode(rec) if not held_out else by_condition(rec, held_out)
+        if a.any():
+            fit.append((i, rec.select(a)))
+        if b.any():
+            test.append((i, rec.select(b)))
+    return fit, test
+
+
+def check_conditions(recordings: list[Recording], held_out) -> None:
+    """Every held-out condition must exist, and some condition must remain to fit on."""
+    known = sorted({c for r in recordings for c in r.conditions()})
+    missing = [c for c in held_out if c not in known]
+    if missing:
+        raise ValueError(f'held-out condition(s) {missing} are not in the recordings; '
+                         f'conditions: {known}')
+    if set(known) <= set(held_out):
+        raise ValueError(f'holding out every condition ({known}) leaves nothing to fit on')

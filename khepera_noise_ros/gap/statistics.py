@@ -1,0 +1,494 @@
+"""The statistics the gap diagnosis compares, with block-bootstrap replicates.
+
+A recording is cut into *blocks* (stationary data: contiguous runs of samples
+within one episode at one heading; closed-loop data: whole episodes), and each
+block is reduced to sufficient sums (counts, sums of residuals, cross products,
+lagged products, indicator counts, regression moments).  Every statistic is a
+smooth function of those sums added up per *stratum* (a cell = condition and
+heading, or a condition).  Resampling blocks with replacement within each
+stratum then costs one small matrix product per replicate set, and it keeps the
+autocorrelation inside blocks, which an i.i.d. bootstrap would destroy.
+
+A statistic is named by a ``Key``: family, sensors, condition, part.  Real and
+simulated data of the same protocol give the same keys, so they line up.
+"""
+from __future__ import annotations
+
+import functools
+import warnings
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy import sparse
+
+from ..recording import Recording
+
+LAGS = (1, 3)                    # autocorrelation lags, in steps
+MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity family
+STEP_LAGS = 3                    # samples after a heading change in the step response
+FACTORS = ('balance', 'intensity', 'turning')
+REPLICATES = 200
+
+
+class Key(NamedTuple):
+    family: str
+    sensors: tuple
+    condition: str | None
+    part: str | None
+
+
+@dataclass
+class Stats:
+    """Values of many statistics: ``values`` is (R, K), row 0 the full-data estimate."""
+
+    keys: list[Key]
+    values: np.ndarray
+
+    @property
+    def estimate(self) -> np.ndarray:
+        return self.values[0]
+
+    @functools.cached_property
+    def variance(self) -> np.ndarray:
+        """Bootstrap variance of each statistic (0 when there are no replicates)."""
+        if self.values.shape[0] < 3:
+            return np.zeros(len(self.keys))
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)     # all-NaN columns give NaN
+            return np.nanvar(self.values[1:], axis=0, ddof=1)
+
+    def index(self) -> dict[Key, int]:
+        return {k: i for i, k in enumerate(self.keys)}
+
+    def __add__(self, other: 'Stats') -> 'Stats':
+        rows = min(self.values.shape[0], other.values.shape[0])
+        return Stats(self.keys + other.keys,
+                     np.concatenate([self.values[:rows], other.values[:rows]], axis=1))
+
+
+@dataclass
+class Blocks:
+    """Per-block sufficient sums of one recording, and how blocks group into strata."""
+
+    kind: str                             # 'stationary' or 'closed_loop'
+    channels: tuple                       # channel numbers of the columns
+    strata: list                          # stratum labels
+    stratum: np.ndarray                   # (B,) stratum index of each block
+    sums: np.ndarray                      # (B, D) flattened sums
+    layout: dict                          # name -> (slice, shape) into D
+    extra: dict = field(default_factory=dict)   # facts the statistics need
+
+    def __post_init__(self):
+        order = np.argsort(self.stratum, kind='stable')     # each stratum's blocks together
+        self.stratum, self.sums = self.stratum[order], self.sums[order]
+        self.edges = np.searchsorted(self.stratum, np.arange(len(self.strata) + 1))
+
+    def part(self, flat: np.ndarray, name: str) -> np.ndarray:
+        """The ``name`` sums from (..., D) flat sums, reshaped to (..., *shape)."""
+        where, shape = self.layout[name]
+        return flat[..., where].reshape(flat.shape[:-1] + shape)
+
+
+def _pack(parts: dict[str, np.ndarray], blocks: int) -> tuple[np.ndarray, dict]:
+    layout, columns, at = {}, [], 0
+    for name, value in parts.items():
+        shape = value.shape[1:]
+        size = int(np.prod(shape, dtype=int))
+        layout[name] = (slice(at, at + size), shape)
+        columns.append(value.reshape(blocks, size))
+        at += size
+    return np.concatenate(columns, axis=1).astype(np.float64), layout
+
+
+# -- stationary ---------------------------------------------------------------------------
+
+def cells(rec: Recording) -> tuple[list, np.ndarray]:
+    """(labels, index per sample): a cell is a (condition, heading) pair."""
+    heading = np.round(rec.heading_deg, 1)
+    known = np.isfinite(heading)
+    conditions, cond = np.unique(rec.condition, return_inverse=True)
+    pairs = np.stack([cond, np.where(known, heading, np.inf)], axis=1)
+    unique, first, index = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)                       # labels in order of first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    labels = [(str(conditions[int(unique[i, 0])]),
+               float(unique[i, 1]) if np.isfinite(unique[i, 1]) else None) for i in order]
+    return labels, rank[index.ravel()]
+
+
+def units(rec: Recording, cell: np.ndarray) -> list[np.ndarray]:
+    """Sample indices of each (episode, cell) run, in step order."""
+    order = np.lexsort((rec.step, cell, rec.episode))
+    key = rec.episode[order] * (int(cell.max()) + 1 if cell.size else 1) + cell[order]
+    edges = np.flatnonzero(np.diff(key)) + 1
+    return np.split(order, edges) if order.size else []
+
+
+def block_length(rec: Recording, channels) -> int:
+    """Blocks twice the integrated autocorrelation time of the residuals, at least 5."""
+    labels, cell = cells(rec)
+    runs = units(rec, cell)
+    x = rec.readings[:, list(channels)]
+    longest = max((r.size for r in runs), default=1)
+    acf = []
+    for lag in range(1, max(2, longest // 4)):
+        num = den = 0.0
+        for r in runs:
+            y = x[r] - x[r].mean(axis=0)
+            if r.size > lag:
+                num += float((y[:-lag] * y[lag:]).sum())
+            den += float((y * y).sum())
+        rho = num / den if den > 0 else 0.0
+        if rho < 0.05:
+            break
+        acf.append(rho)
+    tau = 1.0 + 2.0 * sum(acf)
+    return int(min(max(5, int(np.ceil(2 * tau))), max(2, longest // 2)))
+
+
+def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
+    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
+    channels = tuple(channels)
+    labels, cell = cells(rec)
+    x = rec.readings[:, list(channels)].astype(np.float64)
+    runs = units(rec, cell)
+    y = x.copy()
+    for r in runs:                     # residuals about each run's own mean: the same
+        y[r] -= x[r].mean(axis=0)      # small bias for real and simulated runs alike
+    order = np.concatenate(runs)
+    run_of = np.repeat(np.arange(len(runs)), [r.size for r in runs])
+    position = np.concatenate([np.arange(r.size) for r in runs])
+    block_key = run_of * (position.max() // length + 2) + position // length
+    _, block = np.unique(block_key, return_inverse=True)
+    sizes = np.bincount(block)
+    keep = sizes[block] >= 2                     # a lone sample carries no spread
+    order, block, run_of = order[keep], block[keep], run_of[keep]
+    _, block = np.unique(block, return_inverse=True)
+    nb = int(block.max()) + 1 if block.size else 0
+    yo, xo = y[order], x[order]
+    parts = {'n': np.bincount(block, minlength=nb)[:, None].astype(np.float64),
+             'sx': _block_sum(block, xo, nb),
+             's1': _block_sum(block, yo, nb),
+             's2': _block_sum(block, yo[:, :, None] * yo[:, None, :], nb),
+             's4': _block_sum(block, yo ** 4, nb)}
+    parts['lag_n'], parts['lag_s'] = _lagged(rec.step[order], run_of, yo, block, nb)
+    integer = bool(np.all(x == np.round(x)))
+    modes = _cell_modes(x, cell, len(labels)) if integer else np.full((len(labels), x.shape[1]),
+                                                                      np.nan)
+    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float64), nb)
+    residue = _residue_hits(xo, _modal_residues(x)) if integer \
+        else np.zeros((xo.shape[0], len(channels), len(MODULI)))
+    parts['residue'] = _block_sum(block, residue, nb)
+    block_of = np.full(len(rec), -1)
+    block_of[order] = block
+    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, block_of, nb)
+    stratum = np.zeros(nb, np.int64)
+    stratum[block] = cell[order]
+    sums, layout = _pack(parts, nb)
+    return Blocks('stationary', channels, labels, stratum, sums, layout, {'integer': integer})
+
+
+def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of: np.ndarray,
+                 blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Step responses where a run follows another in the same episode without a gap.
+
+    For the j-th sample after the change, d = x - (new run's mean) against the change
+    D = (old mean) - (new mean): sums of d * D and D^2 per channel, credited to the
+    block of the new run's first sample.  d / D is 0 for a sensor that follows the
+    change at once and 1 while it still reports the old heading.
+    """
+    dd = np.zeros((blocks, STEP_LAGS, x.shape[1]))
+    d2 = np.zeros((blocks, STEP_LAGS, x.shape[1]))
+    starts = sorted(runs, key=lambda r: (int(rec.episode[r[0]]), int(rec.step[r[0]])))
+    means = [x[r].mean(axis=0) for r in starts]
+    for i, (old, new) in enumerate(zip(starts[:-1], starts[1:])):
+        b = block_of[new[0]]
+        if rec.episode[old[0]] != rec.episode[new[0]] or b < 0 or \
+                rec.step[new[0]] != rec.step[old[-1]] + 1 or new.size <= STEP_LAGS:
+            continue
+        change = means[i] - means[i + 1]
+        dd[b] += (x[new[:STEP_LAGS]] - means[i + 1]) * change
+        d2[b] += change ** 2
+    return dd, d2
+
+
+def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray:
+    """Sums of ``values`` per block; ``block`` must be non-decreasing."""
+    out = np.zeros((blocks,) + values.shape[1:])
+    if block.size:
+        starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
+        out[block[starts]] = np.add.reduceat(values, starts, axis=0)
+    return out
+
+
+def _lagged(steps: np.ndarray, run: np.ndarray, y: np.ndarray, block: np.ndarray,
+            blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Products of residues ``lag`` steps apart in the same run, credited to the block of
+    the first sample: (blocks, lags) counts and (blocks, lags, C) sums."""
+    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps
+    sorter = np.argsort(key)
+    counts = np.zeros((blocks, len(LAGS)))
+    sums = np.zeros((blocks, len(LAGS), y.shape[1]))
+    for li, lag in enumerate(LAGS):
+        at = np.searchsorted(key, key + lag, sorter=sorter)
+        at = np.minimum(at, key.size - 1)
+        partner = sorter[at]
+        hit = key[partner] == key + lag
+        counts[:, li] = np.bincount(block[hit], minlength=blocks)
+        sums[:, li] = _block_sum(block[hit], y[hit] * y[partner[hit]], blocks)
+    return counts, sums
+
+
+def _cell_modes(x: np.ndarray, cell: np.ndarray, cells: int) -> np.ndarray:
+    """(cells, C) the most common (integer) reading of each channel in each cell."""
+    low = np.nanmin(x)
+    span = int(np.nanmax(x) - low) + 1
+    channels = x.shape[1]
+    code = ((cell[:, None] * channels + np.arange(channels)[None, :]) * span
+            + (x - low).astype(np.int64)).ravel()
+    counts = np.bincount(code, minlength=cells * channels * span)
+    return counts.reshape(cells, channels, span).argmax(axis=2) + low
+
+
+def _modal_residues(x: np.ndarray) -> np.ndarray:
+    """(C, len(MODULI)) the most common residue of each channel modulo each step."""
+    columns = np.arange(x.shape[1])
+    out = np.zeros((x.shape[1], len(MODULI)), np.int64)
+    for j, q in enumerate(MODULI):
+        code = (np.mod(x, q).astype(np.int64) + q * columns).ravel()
+        out[:, j] = np.bincount(code, minlength=q * x.shape[1]).reshape(-1, q).argmax(axis=1)
+    return out
+
+
+def _residue_hits(x: np.ndarray, modal: np.ndarray) -> np.ndarray:
+    """(N, C, len(MODULI)) 1 where a reading falls in its channel's modal residue class."""
+    return np.stack([np.mod(x, q) == modal[:, j] for j, q in enumerate(MODULI)],
+                    axis=2).astype(np.float64)
+
+
+# -- closed loop --------------------------------------------------------------------------
+
+def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
+    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front)."""
+    conditions = rec.conditions()
+    heading_known = bool(np.isfinite(rec.heading_deg).all())
+    rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
+                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading')}
+    stratum = []
+    for e in np.unique(rec.episode):
+        idx = np.flatnonzero(rec.episode == e)
+        idx = idx[np.argsort(rec.step[idx])]
+        r = rec.readings[idx][:, :8].astype(np.float64)
+        steps = rec.step[idx]
+        u = rec.direction[idx] * rec.power[idx]
+        phase = steps % perturb_every
+        factors = _factors(r, rec.power[idx])
+        onehot = (phase[:, None] == np.arange(perturb_every)[None, :]).astype(np.float64)
+        rows['n'].append([idx.size])
+        rows['level'].append(r.sum(axis=0))
+        rows['factor'].append(factors.T @ onehot)
+        rows['phase_n'].append(onehot.sum(axis=0))
+        rows['power'].append(rec.power[idx] @ onehot)
+        rows['right'].append([(rec.direction[idx] > 0).sum()])
+        xtx, xty, xty_sensor = _turn_moments(r, u, steps, perturb_every)
+        rows['xtx'].append(xtx)
+        rows['xty'].append(xty)
+        rows['xty_sensor'].append(xty_sensor)
+        rows['heading'].append(_heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
+                               if heading_known else np.zeros(2))
+        stratum.append(conditions.index(str(rec.condition[idx[0]])))
+    parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
+    sums, layout = _pack(parts, len(stratum))
+    return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
+                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
+
+
+def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """(T, 3) balance, intensity, turning per step, as in core.task.fitness_factors."""
+    left, right = r[:, 0:3].mean(axis=1), r[:, 3:6].mean(axis=1)
+    balance = 1.0 - np.abs(left - right) / 525.0
+    intensity = 1.0 - (r[:, 2] + r[:, 3]) / (2 * 525.0)
+    return np.stack([balance, intensity, (power != 0).astype(np.float64)], axis=1)
+
+
+def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every: int):
+    """Moments of the regression of the next change in readings on u(t) and u(t-1).
+
+    Transitions into a perturbation step are left out: the knock, not the command,
+    moves the heading there.
+    """
+    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
+    ok = [j for j in range(1, len(steps) - 1)
+          if steps[j + 1] == steps[j] + 1 and steps[j - 1] == steps[j] - 1
+          and steps[j + 1] % perturb_every != 0]
+    ok = np.asarray(ok, np.int64)
+    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1) if ok.size else np.zeros((0, 3))
+    dy = imbalance[ok + 1] - imbalance[ok] if ok.size else np.zeros(0)
+    dr = r[ok + 1] - r[ok] if ok.size else np.zeros((0, 8))
+    return x.T @ x, x.T @ dy, x.T @ dr
+
+
+def _heading_moments(heading: np.ndarray, u: np.ndarray, steps: np.ndarray,
+                     perturb_every: int) -> np.ndarray:
+    """(sum u^2, sum u * dh) over consecutive unperturbed steps: turn per unit of command."""
+    ok = np.flatnonzero(np.diff(steps) == 1)
+    dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
+    keep = (steps[ok + 1] % perturb_every) != 0
+    return np.array([(u[ok][keep] ** 2).sum(), (u[ok][keep] * dh[keep]).sum()])
+
+
+# -- resampling ---------------------------------------------------------------------------
+
+def weights(blocks: Blocks, replicates: int, rng: np.random.Generator) -> np.ndarray:
+    """(1 + R, B) block weights: the full data, then stratified bootstrap draws."""
+    w = np.zeros((1 + replicates, blocks.stratum.size))
+    w[0] = 1.0
+    for lo, hi in zip(blocks.edges[:-1], blocks.edges[1:]):
+        if replicates and hi > lo:
+            picks = rng.integers(lo, hi, size=(replicates, hi - lo))
+            rows = np.repeat(np.arange(1, replicates + 1), hi - lo)
+            np.add.at(w, (rows, picks.ravel()), 1.0)
+    return w
+
+
+def stratum_sums(blocks: Blocks, w: np.ndarray) -> np.ndarray:
+    """(R, S, D) weighted sums of each stratum's blocks."""
+    r, b = w.shape
+    strata = len(blocks.strata)
+    rows = (np.arange(r)[:, None] * strata + blocks.stratum[None, :]).ravel()
+    pick = sparse.csr_matrix((w.ravel(), (rows, np.tile(np.arange(b), r))),
+                             shape=(r * strata, b))
+    return np.asarray(pick @ blocks.sums).reshape(r, strata, -1)
+
+
+def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stats:
+    """All statistics of ``blocks``, full data first, then ``replicates`` resamples."""
+    w = weights(blocks, replicates, np.random.default_rng(seed))
+    sums = stratum_sums(blocks, w)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        if blocks.kind == 'stationary':
+            return _stationary_stats(blocks, sums)
+        return _closed_loop_stats(blocks, sums)
+
+
+def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
+    n = b.part(sums, 'n')[..., 0]                            # (R, S)
+    s1, s2 = b.part(sums, 's1'), b.part(sums, 's2')
+    level = b.part(sums, 'sx') / n[..., None]                 # (R, S, C)
+    centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
+    cell_var = np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1)
+    conditions = list(dict.fromkeys(c for c, _ in b.strata))
+    ch = b.channels
+    keys, cols = [], []
+
+    def add(key: Key, value: np.ndarray) -> None:
+        keys.append(key)
+        cols.append(value)
+
+    cell_sd = np.sqrt(cell_var)
+    for s, (c, h) in enumerate(b.strata):
+        part = None if h is None else f'heading {h:g} deg'
+        for k, sensor in enumerate(ch):
+            add(Key('level', (sensor,), c, part), level[:, s, k])
+            add(Key('spread', (sensor,), c, part), cell_sd[:, s, k])
+    for c in conditions:
+        members = [s for s, lab in enumerate(b.strata) if lab[0] == c]
+        dof = (n[:, members] - 1).sum(axis=1)
+        cov = centred[:, members].sum(axis=1) / dof[:, None, None]
+        var = np.diagonal(cov, axis1=-2, axis2=-1)
+        sd = np.sqrt(var)
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
+        for k in range(len(ch)):
+            for m in range(k + 1, len(ch)):
+                add(Key('correlation', (ch[k], ch[m]), c, None), corr[:, k, m])
+        lag_n = b.part(sums, 'lag_n')[:, members].sum(axis=1)          # (R, L)
+        lag_s = b.part(sums, 'lag_s')[:, members].sum(axis=1)          # (R, L, C)
+        acf = lag_s / lag_n[..., None] / var[:, None, :]
+        for li, lag in enumerate(LAGS):
+            for k, sensor in enumerate(ch):
+                add(Key('autocorrelation', (sensor,), c, f'lag {lag}'), acf[:, li, k])
+        s4 = b.part(sums, 's4')[:, members].sum(axis=1)
+        total = n[:, members].sum(axis=1)
+        kurt = s4 / total[:, None] / var ** 2 - 3.0
+        for k, sensor in enumerate(ch):
+            add(Key('kurtosis', (sensor,), c, None), kurt[:, k])
+    slope = _slopes(level, cell_sd)
+    for k, sensor in enumerate(ch):
+        add(Key('spread_vs_level', (sensor,), None, None), slope[:, k])
+    d2 = b.part(sums, 'step_d2').sum(axis=1)                       # (R, J, C)
+    if (d2[0] > 0).any():
+        response = b.part(sums, 'step_dd').sum(axis=1) / d2
+        for k, sensor in enumerate(ch):
+            if d2[0, 0, k] >= 100.0 * STEP_LAGS:     # changes too small to time are left out
+                for j in range(STEP_LAGS):
+                    add(Key('step_response', (sensor,), None, f'sample {j} after a change'),
+                        response[:, j, k])
+    total = n.sum(axis=1)[:, None]
+    if b.extra['integer']:
+        for c in conditions:
+            members = [s for s, lab in enumerate(b.strata) if lab[0] == c]
+            share = b.part(sums, 'at_mode')[:, members].sum(axis=1) \
+                / n[:, members].sum(axis=1)[:, None]
+            for k, sensor in enumerate(ch):
+                add(Key('mode_share', (sensor,), c, None), share[:, k])
+        frac = b.part(sums, 'residue').sum(axis=1) / total[..., None]
+        for k, sensor in enumerate(ch):
+            for j, q in enumerate(MODULI):
+                add(Key('granularity', (sensor,), None, f'step {q}'), frac[:, k, j])
+    return Stats(keys, np.stack(cols, axis=1))
+
+
+def _slopes(level: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """(R, C) least-squares slope of per-cell spread on per-cell level, per channel."""
+    dl = level - level.mean(axis=1, keepdims=True)
+    ds = sd - sd.mean(axis=1, keepdims=True)
+    return (dl * ds).sum(axis=1) / (dl * dl).sum(axis=1)
+
+
+def _closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
+    keys, cols = [], []
+    n = b.part(sums, 'n')[..., 0]
+    phases = b.extra['perturb_every']
+    for s, c in enumerate(b.strata):
+        level = b.part(sums, 'level')[:, s] / n[:, s, None]
+        for k in range(8):
+            keys.append(Key('closed_loop_level', (k,), c, None))
+            cols.append(level[:, k])
+        factor = b.part(sums, 'factor')[:, s]                    # (R, 3, P)
+        count = b.part(sums, 'phase_n')[:, s]                    # (R, P)
+        power = b.part(sums, 'power')[:, s] / count
+        for p in range(phases):
+            part = f'step {p} after perturbation'
+            for f, name in enumerate(FACTORS):
+                keys.append(Key(f'fitness_{name}', (0, 1, 2, 3, 4, 5), c, part))
+                cols.append(factor[:, f, p] / count[:, p])
+            keys.append(Key('turn_power', (), c, part))
+            cols.append(power[:, p])
+        keys.append(Key('turn_right_fraction', (), c, None))
+        cols.append(b.part(sums, 'right')[:, s, 0] / n[:, s])
+        xtx, xty = b.part(sums, 'xtx')[:, s], b.part(sums, 'xty')[:, s]
+        beta = _solve(xtx, xty[..., None])[..., 0]               # (R, 3)
+        for j, lag in enumerate(('lag 0', 'lag 1')):
+            keys.append(Key('turn_response', (0, 1, 2, 3, 4, 5), c, lag))
+            cols.append(beta[:, j])
+        beta_s = _solve(xtx, b.part(sums, 'xty_sensor')[:, s])   # (R, 3, 8)
+        for k in range(8):
+            for j, lag in enumerate(('lag 0', 'lag 1')):
+                keys.append(Key('sensor_turn_response', (k,), c, lag))
+                cols.append(beta_s[:, j, k])
+        if b.extra['heading']:
+            h = b.part(sums, 'heading')[:, s]
+            keys.append(Key('turn_size', (), c, 'deg per unit of command'))
+            cols.append(h[:, 1] / h[:, 0])
+    return Stats(keys, np.stack(cols, axis=1))
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched least squares that tolerates singular moment matrices (NaN there)."""
+    out = np.full(b.shape, np.nan)
+    ok = np.abs(np.linalg.det(a)) > 1e-9
+    if ok.any():
+        out[ok] = np.linalg.solve(a[ok], b[ok])
+    return out

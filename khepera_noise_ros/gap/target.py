@@ -1,0 +1,151 @@
+"""One set of real recordings held against the simulator, with or without added effects.
+
+A ``Target`` computes the real statistics once (with bootstrap replicates) and
+replays the recordings' protocols in the simulator on demand.  ``compare``
+gives the full comparison (bootstrap variance on both sides); ``objective``
+is the cheap version used while fitting: simulated estimates only, with the
+simulated variance taken as the real one divided by the number of simulated
+copies, and common random numbers (a fixed seed) so that the objective is a
+deterministic function of the effect's parameters.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..recording import Recording
+from . import replay, statistics
+from .simconfig import SimConfig
+from .statistics import Stats
+from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, standard_error
+
+SIM_COPIES = 3
+
+
+@dataclass
+class Target:
+    recordings: list[Recording]
+    config: SimConfig
+    seed: int = 0
+    base: str = 'auto'
+    copies: int = SIM_COPIES
+    replicates: int = statistics.REPLICATES
+    block_lengths: list[int] = field(default_factory=list)
+    real: Stats = field(init=False)
+    kinds: list[str] = field(init=False)
+
+    def __post_init__(self):
+        if not self.block_lengths:
+            self.block_lengths = [_block_length(r) for r in self.recordings]
+        self.kinds = [replay.kind(r) for r in self.recordings]
+        self._real = [statistics.compute(_blocks(rec, n, self.config), self.replicates,
+                                         self.seed + i)
+                      for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
+        self.real = _join(self._real)
+
+    def _chosen(self, kinds) -> list[int]:
+        return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
+
+    def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
+        copies = self.copies if copies is None else copies
+        return [replay.replay(self.recordings[i], self.config, effects,
+                              seed=self.seed + 7919 * i, replicates=copies, base=self.base)
+                for i in self._chosen(kinds)]
+
+    def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
+        return self._simulated(effects, replicates, kinds)[0]
+
+    def _simulated(self, effects, replicates: int, kinds) -> tuple[Stats, np.ndarray]:
+        """Simulated statistics of all copies together, and per statistic the factor by
+        which the block bootstrap understates the variance of cell levels (see
+        ``_level_inflation``)."""
+        stats, factors = [], []
+        for i, sim in zip(self._chosen(kinds), self.simulate(effects, kinds=kinds)):
+            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config),
+                                   replicates, self.seed + 101 + i)
+            stats.append(s)
+            factors.append(self._level_inflation(i, sim, s))
+        return _join(stats), np.concatenate(factors)
+
+    def _level_inflation(self, i: int, sim: Recording, pooled: Stats) -> np.ndarray:
+        """Per statistic of ``pooled``: 1, except cell levels of stationary data.
+
+        A slow wander moves whole runs, which blocks within a run cannot show.  The
+        copies of the simulation are independent replays, so the spread of a level
+        between copies is its true sampling variance under the simulated model; its
+        ratio to the real data's bootstrap variance, pooled over the levels of a
+        condition, scales the variance of those levels on both sides (never below 1).
+        """
+        factor = np.ones(len(pooled.keys))
+        if self.kinds[i] != 'stationary' or self.copies < 2:
+            return factor
+        span = int(self.recordings[i].episode.max()) + 1
+        copies = [statistics.compute(_blocks(sim.select(sim.episode // span == k),
+                                             self.block_lengths[i], self.config), 0)
+                  for k in range(self.copies)]
+        real = self._real[i]
+        real_index = real.index()
+        spread = np.var(np.stack([c.estimate for c in copies]), axis=0, ddof=1)
+        index = copies[0].index()
+        by_condition: dict = {}
+        for key in pooled.keys:
+            if key.family == 'level' and key in real_index and key in index:
+                acc = by_condition.setdefault(key.condition, [0.0, 0.0])
+                acc[0] += spread[index[key]]
+                acc[1] += real.variance[real_index[key]]
+        ratio = {c: float(np.clip(a / b, 1.0, 1e4)) if b > 0 else 1.0
+                 for c, (a, b) in by_condition.items()}
+        for j, key in enumerate(pooled.keys):
+            if key.family == 'level':
+                factor[j] = ratio.get(key.condition, 1.0)
+        return factor
+
+    def compare(self, effects=()) -> Comparison:
+        """Real against simulated-with-``effects``, bootstrap variance on both sides."""
+        sim, factor = self._simulated(effects, self.replicates, None)
+        return compare(self.real, sim, factor)
+
+    def objective(self, effects=(), kinds=None, families=None, margin=MARGIN) -> float:
+        """The discrepancy with ``effects`` added, from simulated estimates only, over the
+        recordings of ``kinds`` and the statistics of ``families`` (all for None)."""
+        real = _join([self._real[i] for i in self._chosen(kinds)])
+        sim, factor = self._simulated(effects, 0, kinds)
+        where = sim.index()
+        pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where
+                 and (families is None or k.family in families)]
+        ri, si = (np.array(p, np.int64) for p in zip(*pairs))
+        d = real.estimate[ri] - sim.estimate[si]
+        se = standard_error(real.variance[ri] * factor[si] * (1.0 + 1.0 / self.copies),
+                            [real.keys[i] for i in ri])
+        ok = np.isfinite(d) & np.isfinite(se)
+        return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
+
+    def replicate_discrepancies(self, c: Comparison) -> np.ndarray:
+        """Discrepancy of each bootstrap replicate of the real data against the simulated
+        side of ``c`` (a comparison of this target)."""
+        index = self.real.index()
+        rows = [index[k] for k in c.keys]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            z = (self.real.values[1:, rows] - c.sim[None]) / c.se[None]
+        z = np.nan_to_num(z, nan=0.0, posinf=1e3, neginf=-1e3)
+        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+
+
+def _join(parts: list[Stats]) -> Stats:
+    out = parts[0]
+    for p in parts[1:]:
+        out = out + p
+    return out
+
+
+def _block_length(rec: Recording) -> int:
+    if replay.kind(rec) == 'closed_loop':
+        return 0
+    return statistics.block_length(rec, rec.channels_used)
+
+
+def _blocks(rec: Recording, length: int, config: SimConfig) -> statistics.Blocks:
+    if replay.kind(rec) == 'closed_loop':
+        return statistics.closed_loop_blocks(rec, config.task.perturb_every)
+    return statistics.stationary_blocks(rec, rec.channels_used, length)
