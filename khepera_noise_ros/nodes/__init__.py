@@ -1,0 +1,70 @@
+"""Thin rclpy adapters over the core: simulator, controller, evolution_manager.
+
+``protocol`` is the topic contract, ``robot_node`` the protocol every robot node
+(simulator, hardware bridge) speaks, ``graph`` the evaluator that drives an
+episode through the topics.
+"""
+from __future__ import annotations
+
+from collections import Counter
+import sys
+import time
+from typing import Callable
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+
+
+def spin_node(make_node: Callable[[], Node], args=None,
+              until: Callable[[Node], Future] | None = None) -> int:
+    """The body of a node's main(): init, spin until Ctrl-C, shutdown or ``until(node)``
+    completes, clean up.  Returns the exit status.
+
+    A parameter the node refuses at start (from a params file, say) ends it with
+    one line naming the value and status 2, not a traceback; a failed ``until``
+    future gives status 1.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        if until is None:
+            rclpy.spin(node)
+            return 0
+        future = until(node)
+        rclpy.spin_until_future_complete(node, future)
+        return 1 if future.exception() is not None else 0
+    except (ValueError, ParameterException) as exc:
+        print(f'{sys.argv[0]}: error: {exc}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0 if until is None else 130
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+class Dropped(Counter):
+    """Messages a node dropped, by kind; each drop is logged, warnings at most once a
+    second per kind (the count in the next one says how many there were)."""
+
+    def __init__(self, node: Node):
+        super().__init__()
+        self._logger = node.get_logger()
+        self._warned: dict[str, float] = {}
+
+    def add(self, kind: str, reason: str, warn: bool = True) -> bool:
+        """Count and log one dropped message; returns False so a check can return it."""
+        self[kind] += 1
+        message = f'dropped a message ({kind}, {self[kind]} so far): {reason}'
+        now = time.monotonic()
+        if warn and now - self._warned.get(kind, -1.0) >= 1.0:
+            self._warned[kind] = now
+            self._logger.warning(message)
+        else:
+            self._logger.debug(message)
+        return False

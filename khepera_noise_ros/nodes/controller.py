@@ -1,0 +1,102 @@
+"""The controller node: the 6-2-2 networks under evaluation, one per robot.
+
+Its ``genomes`` parameter holds B genomes of 20 genes, flattened (genome 0's
+genes first).  Every ``light`` message with B robots is answered at once with
+the ``cmd_turn`` of the same (episode, step), computed by ``core.network.act``.
+A light message with a different number of robots, or a malformed one, is
+dropped and counted with a warning.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray, Int32MultiArray
+
+from ..core import network
+from . import Dropped, protocol, spin_node
+from .params import Spec, declare
+
+GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: one network per '
+               'robot of the episode, in the order of its seeds.',
+               type_=Parameter.Type.DOUBLE_ARRAY)
+
+
+def genomes_from(value) -> np.ndarray:
+    """(B, 20) genomes from the flat parameter value, or a ValueError with the reason."""
+    flat = np.asarray(value, dtype=np.float64).reshape(-1)
+    if flat.size % network.GENES:
+        raise ValueError(f'genomes must hold a multiple of {network.GENES} values (one genome '
+                         f'per robot), got {flat.size}')
+    return network.check_genomes(flat.reshape(-1, network.GENES))
+
+
+def _networks(weights: network.Weights | None) -> int:
+    return 0 if weights is None else weights.b_o.shape[1]
+
+
+class Controller(Node):
+    """Answers each light message with the networks' turn commands."""
+
+    def __init__(self, node_name: str = 'controller', **kwargs):
+        super().__init__(node_name, **kwargs)
+        declare(self, [GENOMES])
+        self.dropped = Dropped(self)
+        self._weights = self._load(self.get_parameter(GENOMES.name).value)
+        self._pub = self.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
+        self.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
+                                 protocol.QOS, raw=True)      # unpacked by protocol, numpy
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
+
+    @property
+    def robots(self) -> int:
+        """How many networks the genomes hold (the robots a light message must have)."""
+        return _networks(self._weights)
+
+    @staticmethod
+    def _load(value) -> network.Weights | None:
+        genomes = genomes_from(value)
+        return network.unpack(genomes) if len(genomes) else None
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        for p in params:
+            if p.name == GENOMES.name:
+                try:
+                    genomes_from(p.value)
+                except ValueError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, params: list[Parameter]) -> None:
+        for p in params:
+            if p.name == GENOMES.name:
+                self._weights = self._load(p.value)
+
+    def _on_light(self, msg: bytes) -> None:
+        try:
+            batch = protocol.unpack_light(msg)
+        except protocol.Malformed as exc:
+            self.dropped.add('malformed', str(exc))
+            return
+        weights = self._weights                 # one snapshot: a set may swap it meanwhile
+        robots = _networks(weights)
+        if batch.values.shape[0] != robots:
+            self.dropped.add('wrong_robots', f'light ({batch.episode}, {batch.step}) has '
+                             f'{batch.values.shape[0]} robots, genomes hold {robots}')
+            return
+        readings = np.ascontiguousarray(batch.values.T, dtype=np.float32)
+        direction, power = network.act(weights, readings)
+        self._pub.publish(protocol.pack_cmd_turn(batch.episode, batch.step, direction, power,
+                                                 raw=True))
+
+
+def main(args=None) -> int:
+    return spin_node(Controller, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

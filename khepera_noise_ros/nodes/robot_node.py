@@ -1,0 +1,277 @@
+"""A robot node: the lockstep and real-time protocol of ``protocol`` over a backend.
+
+The node only carries messages; a *backend* owns the robots.  Any object with
+``reset(seed, robots=None, bearing_deg=None) -> readings (8, B)``,
+``step(direction (B,), power (B,)) -> readings (8, B) or None when the episode
+is over``, and attributes ``task`` (core Task), ``bearing_deg`` ((B,) degrees or
+None when unknown) and ``done`` will do: ``core.task.Episodes`` for the
+simulator, a serial link for the hardware bridge.  A subclass adds its own
+parameters through ``EXTRA_SPECS``, ``check_parameters`` and
+``apply_parameters``, and builds its backend in ``make_backend``.
+
+Lockstep: ``episode_start`` resets the backend and publishes ``light`` and
+``bearing`` for (episode, 0).  A ``cmd_turn`` tagged with the current
+(episode, step) is applied and answered with (episode, step + 1); anything
+else is counted and dropped, so a reading is never paired with another step's
+command.  With no matching command after ``resend_timeout_s`` the last
+messages are published again (same tags), at most ``MAX_RESENDS`` times a step.
+After the last step only ``bearing`` (episode, steps) is published: it marks
+the end of the episode.  ``bearing`` is packed and published only while some
+node subscribes to it (the evolution needs only light and cmd_turn).
+
+Real time: a timer at ``rate_hz`` steps the robots with the latest command
+received for the current episode (no command: no turn), like a physical robot
+that does not wait.  Episodes follow one another; ``episode_start`` still
+starts one with given seeds.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Protocol
+
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray, Int32MultiArray
+
+from ..core.task import Task
+from . import Dropped, protocol
+from .params import (GEOMETRY_SPECS, TASK_SPECS, Spec, check_choice, current, declare,
+                     proposed, task_from, world_from)
+
+MODES = ('lockstep', 'realtime')
+MAX_RESENDS = 10
+
+ROBOT_SPECS = (
+    Spec('mode', 'lockstep', 'lockstep: step when the command for the current step arrives '
+         '(evolution); realtime: step on a timer at rate_hz.', choices=MODES),
+    Spec('rate_hz', 10.0, 'Control steps per second in realtime mode.', 0.01, 10000.0),
+    Spec('resend_timeout_s', 0.5, 'Lockstep: republish the last light and bearing when no '
+         'command for the current step came within this many seconds.', 0.001, 3600.0),
+) + TASK_SPECS + GEOMETRY_SPECS
+
+
+class Backend(Protocol):
+    task: Task
+    done: bool
+
+    @property
+    def bearing_deg(self) -> np.ndarray | None: ...
+
+    def reset(self, seed, robots: int | None = None, bearing_deg=None) -> np.ndarray: ...
+
+    def step(self, direction, power) -> np.ndarray | None: ...
+
+
+class RobotNode(Node):
+    """Publishes light/bearing, applies cmd_turn, in lockstep or real time."""
+
+    EXTRA_SPECS: tuple[Spec, ...] = ()
+
+    def __init__(self, node_name: str = 'robot', backend: Backend | None = None, **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.specs = self.parameter_specs()
+        declare(self, self.specs)
+        self.values = current(self, self.specs)
+        self.check_parameters(self.values)          # a bad parameter file stops the start
+        self.task = task_from(self.values)
+        self.backend = backend if backend is not None else self.make_backend(self.values)
+        self.dropped = Dropped(self)
+        self.episode: int | None = None
+        self.step_index = 0
+        self._robots = 0
+        self._lock = threading.RLock()
+        self._last: list[tuple[Any, Any]] = []      # (publisher, msg) to resend
+        self._last_sent = 0.0
+        self._resends = 0
+        self._pending_cmd: protocol.Batch | None = None
+        self._realtime_count = 0
+        self._timer = None
+        self._pub_light = self.create_publisher(Float64MultiArray, protocol.LIGHT, protocol.QOS)
+        self._pub_bearing = self.create_publisher(Float64MultiArray, protocol.BEARING,
+                                                  protocol.QOS)
+        # raw: the messages arrive serialized and protocol unpacks them with numpy
+        self.create_subscription(Float64MultiArray, protocol.EPISODE_START,
+                                 self._on_episode_start, protocol.QOS, raw=True)
+        self.create_subscription(Int32MultiArray, protocol.CMD_TURN, self._on_cmd_turn,
+                                 protocol.QOS, raw=True)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
+        self._start_timer()
+
+    @classmethod
+    def parameter_specs(cls) -> tuple[Spec, ...]:
+        return ROBOT_SPECS + cls.EXTRA_SPECS
+
+    # --- hooks for subclasses -----------------------------------------------------------
+
+    def make_backend(self, values: dict[str, Any]) -> Backend:
+        raise NotImplementedError('pass backend= or override make_backend()')
+
+    def check_parameters(self, values: dict[str, Any]) -> None:
+        """Raise ValueError naming the bad value; must not change anything."""
+        check_choice('mode', values['mode'], MODES)
+        task_from(values)
+        world_from(values)
+
+    def apply_parameters(self, values: dict[str, Any], changed: set[str]) -> None:
+        """Swap in new state; the task changes at the next episode, timing at once."""
+        self.task = task_from(values)
+        if changed & {'mode', 'rate_hz', 'resend_timeout_s'}:
+            if 'mode' in changed:
+                self.episode, self._last = None, []
+            self._start_timer()
+
+    def realtime_episode(self, count: int) -> tuple[int, int]:
+        """(seed, robots) of the count-th episode the real-time mode starts by itself."""
+        return count, 1
+
+    # --- parameters ---------------------------------------------------------------------
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        try:
+            self.check_parameters(proposed(self, self.specs, params))
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, params: list[Parameter]) -> None:
+        changed = {p.name for p in params if p.name in self.values}
+        if not changed:
+            return
+        with self._lock:
+            self.values = current(self, self.specs)
+            self.apply_parameters(self.values, changed)
+        self.get_logger().info('parameters set: ' + ', '.join(
+            f'{n}={self.values[n]!r}' for n in sorted(changed)))
+
+    def _start_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        realtime = self.values['mode'] == 'realtime'
+        period = 1.0 / self.values['rate_hz'] if realtime else self.values['resend_timeout_s']
+        self._timer = self.create_timer(period, self._tick if realtime else self._resend)
+
+    # --- lockstep -----------------------------------------------------------------------
+
+    def _on_episode_start(self, msg: bytes) -> None:
+        try:
+            episode, seeds, bearing = protocol.unpack_episode_start(msg)
+        except protocol.Malformed as exc:
+            self.dropped.add('malformed', str(exc))
+            return
+        with self._lock:
+            if episode == self.episode:
+                self.dropped.add('duplicate_start', f'episode {episode} already started',
+                                 warn=False)
+            else:
+                self._start(episode, seeds, bearing)
+
+    def _start(self, episode: int, seeds, bearing, robots: int | None = None) -> None:
+        self.backend.task = self.task
+        try:
+            readings = self.backend.reset(seeds, robots=robots or np.size(seeds),
+                                          bearing_deg=bearing)
+        except (ValueError, RuntimeError, OSError) as exc:
+            self.episode, self._last = None, []
+            self.get_logger().error(f'episode {episode}: could not start: {exc}')
+            return
+        self.episode, self.step_index, self._pending_cmd = episode, 0, None
+        self._publish(readings)
+
+    def _on_cmd_turn(self, msg: bytes) -> None:
+        try:
+            batch = protocol.unpack_cmd_turn(msg)
+        except protocol.Malformed as exc:
+            self.dropped.add('malformed', str(exc))
+            return
+        with self._lock:
+            if not self._matches(batch):
+                return
+            if self.values['mode'] == 'realtime':
+                if self._pending_cmd is None or batch.step >= self._pending_cmd.step:
+                    self._pending_cmd = batch
+            else:
+                self._step(batch.values)
+
+    def _matches(self, batch: protocol.Batch) -> bool:
+        """Is this command for the current episode and (in lockstep) the current step?"""
+        drop = self.dropped.add
+        if batch.episode != self.episode:
+            return drop('other_episode', f'cmd_turn for episode {batch.episode}, current is '
+                        f'{self.episode}', warn=False)
+        if batch.values.shape[0] != self._robots:
+            return drop('wrong_robots', f'cmd_turn has {batch.values.shape[0]} robots, '
+                        f'episode {self.episode} has {self._robots}')
+        if batch.step < self.step_index and (self.values['mode'] == 'lockstep'
+                                             or self.backend.done):
+            return drop('stale', f'cmd_turn for step {batch.step}, current step is '
+                        f'{self.step_index} (a duplicate or a reply to a resend)', warn=False)
+        if batch.step > self.step_index or self.backend.done:
+            return drop('future', f'cmd_turn for step {batch.step} of episode {batch.episode}, '
+                        f'current step is {self.step_index}')
+        return True
+
+    def _step(self, cmd: np.ndarray) -> None:
+        try:
+            readings = self.backend.step(cmd[:, 0], cmd[:, 1])
+        except (ValueError, RuntimeError, OSError) as exc:
+            self.get_logger().error(f'episode {self.episode} aborted at step '
+                                    f'{self.step_index}: {exc}')
+            self.episode, self._last = None, []
+            return
+        self.step_index += 1
+        self._publish(readings)
+
+    def _publish(self, readings: np.ndarray | None) -> None:
+        """Bearing and light for the current step; at the end the bearing alone.  The
+        bearing is packed only while someone subscribes to it."""
+        episode, step = self.episode, self.step_index
+        if readings is not None:
+            self._robots = readings.shape[1]
+        self._last = []
+        if self._pub_bearing.get_subscription_count():
+            bearing = self.backend.bearing_deg
+            if bearing is None:
+                bearing = np.full(self._robots, np.nan)
+            self._last.append((self._pub_bearing,
+                               protocol.pack_bearing(episode, step, bearing, raw=True)))
+        if readings is not None:
+            self._last.append((self._pub_light,
+                               protocol.pack_light(episode, step, readings.T, raw=True)))
+        for pub, msg in self._last:
+            pub.publish(msg)
+        self._last_sent, self._resends = time.monotonic(), 0
+
+    def _resend(self) -> None:
+        with self._lock:
+            if not self._last or self._resends >= MAX_RESENDS \
+                    or time.monotonic() - self._last_sent < self.values['resend_timeout_s']:
+                return
+            self._resends += 1
+            for pub, msg in self._last:
+                pub.publish(msg)
+            self._last_sent = time.monotonic()
+            log = self.get_logger().debug if self.backend.done else self.get_logger().warning
+            log(f'no cmd_turn for episode {self.episode} step {self.step_index} within '
+                f'{self.values["resend_timeout_s"]} s: published it again '
+                f'({self._resends}/{MAX_RESENDS})')
+
+    # --- real time ----------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        with self._lock:
+            if self.episode is None or self.backend.done:
+                count = self._realtime_count
+                self._realtime_count += 1
+                seed, robots = self.realtime_episode(count)
+                self._start(count % protocol.MAX_EPISODE, seed, None, robots)
+                return
+            batch, self._pending_cmd = self._pending_cmd, None
+            if batch is None:               # no command this tick: no turn
+                self._step(np.column_stack([np.ones(self._robots, np.int32),
+                                            np.zeros(self._robots, np.int32)]))
+            else:
+                self._step(batch.values)
