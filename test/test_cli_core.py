@@ -80,3 +80,16 @@ def test_wrong_genome_length_is_named(tmp_path, capsys):
     assert main(['episode', '--genome', str(tmp_path / 'g.json'),
                  '--out', str(tmp_path)]) == 2
     assert '20 genes' in capsys.readouterr().err
+
+
+def test_evolve_trial_k_is_the_ea_with_seed_plus_k(tmp_path):
+    """The same rule as the evolution_manager node, so --seed means the same in both."""
+    from khepera_noise_ros.core import evolution
+    from khepera_noise_ros.core.evaluation import CoreEvaluator
+    from khepera_noise_ros.core.task import Task
+    assert main(['evolve', '--population', '5', '--generations', '2', '--steps', '10',
+                 '--trials', '2', '--seed', '7', '--quiet', '--out', str(tmp_path / 'e.json')]) == 0
+    trials = json.loads((tmp_path / 'e.json').read_text())['trials']
+    ea = evolution.SteadyStateEA(evolution.EAConfig(population=5, generations=2), seed=8)
+    evolution.evolve([ea], CoreEvaluator(task=Task(steps=10)))
+    assert trials[1]['best_genome'] == ea.best_genome.tolist()

@@ -64,8 +64,10 @@ def run(args) -> int:
         raise ValueError(f'--trials must be at least 1, got {args.trials}')
     evaluate = CoreEvaluator(_options.world_from_args(args), noise, Task(steps=args.steps))
     seed_genome = load_genome(args.seed_genome) if args.seed_genome else None
-    seeds = np.random.SeedSequence(args.seed).generate_state(args.trials)
-    eas = [evolution.SteadyStateEA(config, int(s), seed_genome) for s in seeds]
+    # trial k uses seed + k, as the evolution_manager node does: the same --seed gives the
+    # same trials in process and through the graph
+    eas = [evolution.SteadyStateEA(config, args.seed + k, seed_genome)
+           for k in range(args.trials)]
     evolution.evolve(eas, evaluate, progress=_progress_bar(eas, args.quiet))
     write_json(args.out, _result(args, noise, config, eas))
     for k, ea in enumerate(eas):
