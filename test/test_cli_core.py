@@ -88,7 +88,8 @@ def test_evolve_trial_k_is_the_ea_with_seed_plus_k(tmp_path):
     from khepera_noise_ros.core.evaluation import CoreEvaluator
     from khepera_noise_ros.core.task import Task
     assert main(['evolve', '--population', '5', '--generations', '2', '--steps', '10',
-                 '--trials', '2', '--seed', '7', '--quiet', '--out', str(tmp_path / 'e.json')]) == 0
+                 '--trials', '2', '--seed', '7', '--quiet',
+                 '--out', str(tmp_path / 'e.json')]) == 0
     trials = json.loads((tmp_path / 'e.json').read_text())['trials']
     ea = evolution.SteadyStateEA(evolution.EAConfig(population=5, generations=2), seed=8)
     evolution.evolve([ea], CoreEvaluator(task=Task(steps=10)))

@@ -84,6 +84,11 @@ def _with_data(msg, index, value):
      protocol.unpack_light, 'header must be 2 integers'),
     (lambda: _with_data(protocol.pack_episode_start(1, [3]), 1, -1.0),
      protocol.unpack_episode_start, 'seeds must be integers'),
+    (lambda: protocol.pack_episode_start(1, [3, 4], [10.0, 1e300]),
+     protocol.unpack_episode_start, 'start bearings must be finite degrees within +-1e+06, '
+     'got 1e+300'),
+    (lambda: protocol.pack_episode_start(1, [3], [np.nan]), protocol.unpack_episode_start,
+     'start bearings must be finite degrees within +-1e+06, got nan'),
     (lambda: protocol.pack_cmd_turn(1, 0, [1, 0], [1, 1]), protocol.unpack_cmd_turn,
      'direction must be -1 or +1, got 0'),
     (lambda: protocol.pack_cmd_turn(1, 0, [1, 1], [1, 10]), protocol.unpack_cmd_turn,

@@ -1,5 +1,8 @@
-"""The simulator as a robot node: lockstep protocol, resends, bad messages, parameters."""
+"""The simulator as a robot node: lockstep protocol, resends, bad messages, parameters,
+unmodelled effects, and a backend that fails."""
+import json
 from pathlib import Path
+import termios
 
 import numpy as np
 import pytest
@@ -7,10 +10,15 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task
+from khepera_noise_ros.gap import effects as fx, simconfig
+from khepera_noise_ros.gap.simulate import EffectEpisodes
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.evolution_manager import EvolutionManager
 from khepera_noise_ros.nodes.graph import spinning
+from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+from khepera_noise_ros.nodes.simulator import Simulator
+from khepera_noise_ros.reality.khepera_robot import RobotUnreachable
 from nodes_fixtures import Probe, controller, simulator, valid, wait_for
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
@@ -154,7 +162,7 @@ def test_runtime_noise_change_shows_in_the_readings_and_bad_values_are_refused(r
     assert refused[2].reason and 'multiple of 0.1' in refused[3].reason
     assert sim.get_parameter('noise_model').value == 'combination'
     assert sim.get_parameter('dependence_groups').value == '0,1,2,3,4,5;6,7'
-    assert sim.backend.noise == NoiseModel('combination', 0.08, 0.01)
+    assert sim.backend.noise.model_noise == NoiseModel('combination', 0.08, 0.01)
 
 
 @pytest.mark.parametrize('condition, model, dependent, independent', [
@@ -167,7 +175,7 @@ def test_parameter_files_of_the_paper_conditions(ros_context, condition, model, 
              EvolutionManager(context=ros_context, cli_args=args)]
     try:
         sim, _, mgr = nodes
-        assert sim.backend.noise == NoiseModel(model, dependent, independent)
+        assert sim.backend.noise.model_noise == NoiseModel(model, dependent, independent)
         assert sim.task == Task(steps=60, perturb_every=5, perturbation_deg=30.0)
         assert mgr.get_parameter('results_path').value == f'results_sim_{condition}.json'
         assert mgr.get_parameter('phase').value == 1
@@ -204,3 +212,94 @@ def test_realtime_applies_the_latest_command_on_each_tick(ros_context):
     turns = np.diff(np.stack([b.values[:, 0] for b in bearings]), axis=0) % 360
     assert set(np.round(turns, 6).ravel()) <= {0.0, 27.0}
     assert (turns == 27.0).sum() >= turns.size // 2
+
+
+def still_episode(probe: Probe, episode: int, seeds, steps: int) -> np.ndarray:
+    """Run a lockstep episode whose robots never turn; its (steps, B, 8) readings."""
+    probe.publish(EPISODE_START, protocol.pack_episode_start(episode, seeds))
+    readings = []
+    for step in range(steps):
+        (light,) = probe.wait_light(episode, step)
+        readings.append(light.values)
+        probe.publish(CMD_TURN, turn(episode, step, [1] * len(seeds), [0] * len(seeds)))
+    return np.stack(readings)
+
+
+def core_still(seeds, steps: int, effects=()) -> np.ndarray:
+    env = EffectEpisodes(task=Task(steps=steps), effects=effects)
+    out, readings = [], env.reset(np.array(seeds))
+    while readings is not None:
+        out.append(readings.T.copy())
+        readings = env.step(np.ones(len(seeds), int), np.zeros(len(seeds), int))
+    return np.stack(out)
+
+
+def test_a_fitted_effect_in_the_params_file_acts_in_the_simulator(ros_context, tmp_path):
+    """The params file diagnose writes (the configuration plus the fitted effect, here one
+    step of latency on sensors 0 and 1) makes those sensors read one step late; clearing
+    ``effects`` while an episode runs changes the readings from the next episode."""
+    latency = fx.SensorLatency((0, 1), 1)
+    path = simconfig.write(simconfig.SimConfig(task=Task(steps=6)).with_effects(latency),
+                           tmp_path / 'fitted_params.yaml')
+    sim = simulator(ros_context, cli_args=['--ros-args', '--params-file', str(path)],
+                    resend_timeout_s=60.0)
+    probe = Probe(ros_context)
+    with spinning([sim, probe], ros_context):
+        assert probe.connected(EPISODE_START) and probe.connected(CMD_TURN)
+        lagged = still_episode(probe, 1, SEEDS, 3)
+        refused = probe.set_parameters('simulator', effects=json.dumps(
+            [{'name': 'sensor_latency', 'sensors': [8], 'steps': 1}]))
+        cleared = probe.set_parameters('simulator', effects='')       # mid-episode
+        for step in range(3, 6):                                      # the rest of episode 1
+            (light,) = probe.wait_light(1, step)
+            lagged = np.concatenate([lagged, light.values[None]])
+            probe.publish(CMD_TURN, turn(1, step, [1] * 3, [0] * 3))
+        plain = still_episode(probe, 2, SEEDS, 6)
+
+    core = core_still(SEEDS, 6)
+    np.testing.assert_array_equal(lagged[1:, :, :2], core[:-1, :, :2])    # one step late
+    np.testing.assert_array_equal(lagged[0], core[0])                     # the first repeats
+    np.testing.assert_array_equal(lagged[:, :, 2:], core[:, :, 2:])
+    np.testing.assert_array_equal(lagged, core_still(SEEDS, 6, (latency,)))
+    np.testing.assert_array_equal(plain, core)
+    assert not refused[0].successful and 'sensors [8]' in refused[0].reason
+    assert cleared[0].successful and sim.backend.effects == ()
+
+
+class FailingEpisodes(Episodes):
+    """Core episodes whose robots fail at step ``at``, in the way ``how`` names."""
+
+    def __init__(self, how: str, at: int, **kwargs):
+        super().__init__(**kwargs)
+        self.how, self.at = how, at
+
+    def step(self, direction, power):
+        readings = super().step(direction, power)
+        if self.step_index != self.at:
+            return readings
+        if self.how == 'nan':
+            readings[3, 0] = np.nan
+            return readings
+        raise {'unreachable': RobotUnreachable('robot 0 does not answer'),
+               'termios': termios.error(5, 'Input/output error')}[self.how]
+
+
+@pytest.mark.parametrize('how', ['unreachable', 'termios', 'nan'])
+def test_a_failing_backend_ends_the_episode_and_nothing_of_it_is_resent(ros_context, how):
+    sim = Simulator(context=ros_context, backend=FailingEpisodes(how, 2, task=Task(steps=5)),
+                    parameter_overrides=overrides(Simulator.parameter_specs(), {
+                        'steps': 5, 'resend_timeout_s': 0.02}))
+    probe = Probe(ros_context)
+    with spinning([sim, probe], ros_context):
+        assert probe.connected(EPISODE_START) and probe.connected(CMD_TURN)
+        probe.publish(EPISODE_START, protocol.pack_episode_start(3, SEEDS))
+        for step in range(2):
+            probe.wait_light(3, step)
+            probe.publish(CMD_TURN, turn(3, step, [1, 1, 1], [2, 2, 2]))
+        assert wait_for(lambda: sim.episode is None)                   # the robots failed
+        probe.publish(CMD_TURN, turn(3, 2, [1, 1, 1], [2, 2, 2]))      # late, for it
+        assert wait_for(lambda: sim.dropped['other_episode'] == 1)
+        probe.publish(EPISODE_START, protocol.pack_episode_start(4, SEEDS))
+        probe.wait_light(4, 0, copies=5)             # still running, and resending again
+        tags = [tuple(m.data[:2]) for m in probe.messages(LIGHT)]     # valid or not
+    assert tags.count((3, 1)) == 1 and (3, 2) not in tags          # never resent, never sent

@@ -19,6 +19,7 @@ from .khepera import DARK, FRONT
 INPUTS, HIDDEN, OUTPUTS = FRONT, 2, 2
 GENES = INPUTS * HIDDEN + HIDDEN * OUTPUTS + HIDDEN + OUTPUTS   # 20
 LEFT, RIGHT = -1, 1
+MAX_GENE = 1e30              # larger genes overflow the float32 sums
 
 
 @dataclass(frozen=True)
@@ -45,9 +46,11 @@ def check_genomes(genomes) -> np.ndarray:
     if g.ndim != 2 or g.shape[1] != GENES:
         raise ValueError(f'a genome has {GENES} genes; got an array of shape '
                          f'{np.shape(genomes)}')
-    if not np.isfinite(g).all():
-        bad = np.argwhere(~np.isfinite(g))[0]
-        raise ValueError(f'genome {bad[0]} gene {bad[1]} is {g[tuple(bad)]}; genes must be finite')
+    ok = np.isfinite(g) & (np.abs(g) <= MAX_GENE)
+    if not ok.all():
+        bad = np.argwhere(~ok)[0]
+        raise ValueError(f'genome {bad[0]} gene {bad[1]} is {g[tuple(bad)]}; genes must be '
+                         f'finite and within +-{MAX_GENE:g} (the network runs in float32)')
     return g
 
 

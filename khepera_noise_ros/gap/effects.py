@@ -308,6 +308,11 @@ def loads(text: str) -> tuple:
     except json.JSONDecodeError as exc:
         raise ValueError(f'effects must be a JSON list of effects, got {text[:60]!r} '
                          f'({exc.msg})') from None
+    except RecursionError:
+        raise ValueError('effects: JSON nested too deeply') from None
     if not isinstance(data, list):
         raise ValueError(f'effects must be a JSON list, got {type(data).__name__}')
-    return tuple(from_dict(d) for d in data)
+    try:
+        return tuple(from_dict(d) for d in data)
+    except (TypeError, RecursionError) as exc:   # a field of the wrong type
+        raise ValueError(f'effects: a field has the wrong type ({exc})') from None

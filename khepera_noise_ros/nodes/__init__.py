@@ -7,6 +7,8 @@ episode through the topics.
 from __future__ import annotations
 
 from collections import Counter
+import os
+import stat
 import sys
 import time
 from typing import Callable
@@ -20,13 +22,17 @@ from rclpy.task import Future
 
 def spin_node(make_node: Callable[[], Node], args=None,
               until: Callable[[Node], Future] | None = None) -> int:
-    """The body of a node's main(): init, spin until Ctrl-C, shutdown or ``until(node)``
-    completes, clean up.  Returns the exit status.
+    """The body of a node's main(): init, spin until Ctrl-C, SIGTERM, shutdown or
+    ``until(node)`` completes, clean up.  Returns the exit status.
 
     A parameter the node refuses at start (from a params file, say) ends it with
     one line naming the value and status 2, not a traceback; a failed ``until``
-    future gives status 1.
+    future gives status 1.  A callback that meets the shutdown a signal began (a
+    publish on the closed context) ends the node as cleanly as the signal would.
     """
+    stopped = 0 if until is None else 130
+    for fd in (1, 2):                       # stdout, stderr (rcutils logs to stderr)
+        never_block(fd)
     rclpy.init(args=args)
     node = None
     try:
@@ -37,15 +43,37 @@ def spin_node(make_node: Callable[[], Node], args=None,
         future = until(node)
         rclpy.spin_until_future_complete(node, future)
         return 1 if future.exception() is not None else 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return stopped
     except (ValueError, ParameterException) as exc:
+        if not rclpy.ok():
+            return stopped
         print(f'{sys.argv[0]}: error: {exc}', file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0 if until is None else 130
+    except Exception:
+        if rclpy.ok():
+            raise
+        return stopped
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def never_block(fd: int) -> None:
+    """Make writes to ``fd`` (a pipe or terminal) fail rather than wait when its reader
+    stops reading: a log line is lost instead of the node freezing in write(), where no
+    signal can stop it.  ``fd`` is reopened as an open file description of its own, so
+    the processes sharing the pipe or terminal keep blocking writes."""
+    try:
+        mode = os.fstat(fd).st_mode
+        if not (stat.S_ISFIFO(mode) or stat.S_ISCHR(mode)):
+            return
+        own = os.open(f'/proc/self/fd/{fd}', os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError:                 # no /proc, a socket, a pipe nobody reads: leave it
+        return
+    os.dup2(own, fd)
+    os.close(own)
 
 
 class Dropped(Counter):

@@ -18,10 +18,11 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
 from ..core import network
 from . import Dropped, protocol, spin_node
-from .params import Spec, declare
+from .params import Spec, declare, proposed
 
 GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: one network per '
-               'robot of the episode, in the order of its seeds.',
+               f'robot of the episode, in the order of its seeds; genes within '
+               f'+-{network.MAX_GENE:g}.',
                type_=Parameter.Type.DOUBLE_ARRAY)
 
 
@@ -63,18 +64,16 @@ class Controller(Node):
         return network.unpack(genomes) if len(genomes) else None
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
-        for p in params:
-            if p.name == GENOMES.name:
-                try:
-                    genomes_from(p.value)
-                except ValueError as exc:
-                    return SetParametersResult(successful=False, reason=str(exc))
+        try:
+            genomes_from(proposed(self, [GENOMES], params)[GENOMES.name])
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _post_set(self, params: list[Parameter]) -> None:
-        for p in params:
-            if p.name == GENOMES.name:
-                self._weights = self._load(p.value)
+        """Load the value now set: with a name given twice in one request, the last."""
+        if any(p.name == GENOMES.name for p in params):
+            self._weights = self._load(self.get_parameter(GENOMES.name).value)
 
     def _on_light(self, msg: bytes) -> None:
         try:

@@ -47,6 +47,9 @@ BRIDGE_SPECS = tuple(s for s in SIMULATOR_SPECS if s.name in ('deg_per_power', '
 def serial_robots(values: dict[str, Any], logger=None) -> SerialRobots:
     """The robots on the ports (nothing is opened yet); ValueError names a bad setting."""
     check_choice('turn_mode', values['turn_mode'], TURN_MODES)
+    bad = [port for port in values['ports'] if not port.strip() or '\0' in port]
+    if bad:
+        raise ValueError(f'ports must be device paths such as /dev/ttyUSB0, got {bad[0]!r}')
     return SerialRobots(values['ports'], baudrate=values['baudrate'],
                         timeout_s=values['timeout_s'], retries=values['retries'],
                         turn_mode=values['turn_mode'], turn_speed=values['turn_speed'],
@@ -76,9 +79,7 @@ class HardwareBridge(RobotNode):
             self.backend.close()
             self.backend = self.make_backend(values)
             if self.episode is not None:
-                self.get_logger().warning(f'episode {self.episode} ended: serial settings '
-                                          'changed')
-                self.episode, self._last = None, []
+                self.end_episode('serial settings changed')
         elif changed & (set(GEOMETRY) | {'deg_per_power'}):
             self.backend.world = world_from(values)
 

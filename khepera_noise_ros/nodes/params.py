@@ -3,17 +3,20 @@
 Each node lists its parameters once as ``Spec`` rows; ``declare`` gives every
 one a ParameterDescriptor with a description and, where numeric, a range, so
 ``ros2 param describe`` documents the node and rclpy refuses out-of-range values
-before our own checks run.  ``world_from``/``noise_from``/``task_from`` turn a
-dict of parameter values into core objects, raising the core's ValueError
-(which names the value and what is allowed) for the node to hand back as the
-reason a set was refused.
+before our own checks run; it also guards the node's SetParameters services
+(``guard_parameter_services``) so that no request can stop the node.
+``world_from``/``noise_from``/``task_from`` turn a dict of parameter values into
+core objects, raising the core's ValueError (which names the value and what is
+allowed) for the node to hand back as the reason a set was refused.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, Parameter as ParameterMsg,
+                                ParameterDescriptor, SetParametersResult)
+from rcl_interfaces.srv import SetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -52,7 +55,9 @@ class Spec:
 
 
 def declare(node: Node, specs: Iterable[Spec]) -> None:
-    """Declare every spec; an empty-list default is declared by type, then set to []."""
+    """Declare every spec (an empty-list default is declared by type, then set to []) and
+    guard the node's parameter services."""
+    guard_parameter_services(node)
     for spec in specs:
         if spec.type_ is not None:
             node.declare_parameter(spec.name, spec.type_, spec.descriptor())
@@ -67,10 +72,71 @@ def current(node: Node, specs: Iterable[Spec]) -> dict[str, Any]:
 
 
 def proposed(node: Node, specs: Iterable[Spec], params: list[Parameter]) -> dict[str, Any]:
-    """The values the node would have if ``params`` were accepted."""
+    """The values the node would have if ``params`` were accepted; a ValueError for a name
+    the node never declared (rclpy lets an empty name through to the on-set callbacks,
+    which would otherwise declare it) or one given twice (only the last would count)."""
+    names = [p.name for p in params]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f'parameter(s) {twice} given more than once in one request')
     values = current(node, specs)
-    values.update({p.name: p.value for p in params if p.name in values})
+    for p in params:
+        if p.name in values:
+            values[p.name] = p.value
+        elif not p.name or not node.has_parameter(p.name):
+            raise ValueError(f'unknown parameter {p.name!r}; this node has {sorted(values)}')
     return values
+
+
+# --- parameter services that refuse instead of crashing ----------------------------------
+
+_TYPES = frozenset(t.value for t in Parameter.Type)
+
+
+def guard_parameter_services(node: Node) -> None:
+    """Make the node's SetParameters and SetParametersAtomically services refuse, with a
+    reason, what would otherwise raise in the service callback and so stop the executor
+    and every node on it: a type code rcl_interfaces does not define (rclpy raises
+    ValueError on it), or any error while a request is checked and applied (logged)."""
+    for service in node.services:
+        if service.srv_type in (SetParameters, SetParametersAtomically) \
+                and not getattr(service.callback, 'guarded', False):
+            service.callback = _guarded(service.srv_type, service.callback, node)
+
+
+def _refused(reason: str) -> SetParametersResult:
+    return SetParametersResult(successful=False, reason=reason)
+
+
+def _type_error(param: ParameterMsg) -> str:
+    if param.value.type in _TYPES:
+        return ''
+    return (f'parameter {param.name!r} has type code {param.value.type}, which is not a '
+            f'ParameterType (0..{max(_TYPES)})')
+
+
+def _guarded(srv_type, serve: Callable, node: Node) -> Callable:
+    def attempt(request) -> list[SetParametersResult]:
+        """The original service's results for ``request``; a refusal if it raised."""
+        try:
+            response = serve(request, srv_type.Response())
+        except Exception as exc:            # a bug must cost a refusal, never the node
+            node.get_logger().error(f'{srv_type.__name__} request failed: {exc!r}')
+            return [_refused(f'the node failed while setting it: {exc!r}')]
+        return list(response.results) if srv_type is SetParameters else [response.result]
+
+    def guarded(request, response):
+        errors = [_type_error(p) for p in request.parameters]
+        if srv_type is SetParametersAtomically:
+            bad = [e for e in errors if e]
+            response.result = _refused(bad[0]) if bad else attempt(request)[0]
+            return response
+        for param, error in zip(request.parameters, errors):    # one at a time, as rclpy
+            response.results.extend([_refused(error)] if error else attempt(
+                SetParameters.Request(parameters=[param])))
+        return response
+    guarded.guarded = True
+    return guarded
 
 
 def overrides(specs: Iterable[Spec], values: dict[str, Any] | None) -> list[Parameter]:

@@ -10,7 +10,9 @@ paired across episodes or steps:
   episode_start Float64MultiArray [episode | B x (seed[, start bearing deg])] manager -> robot
 
 Readings are 0 (brightest) .. 525 (darkest); direction is -1 (left) or +1
-(right), power 0..9.  ``unpack_*`` raise ``Malformed`` with the reason.
+(right), power 0..9; seeds are integers in [0, 2**53), start bearings finite
+degrees within +-1e6 (wrapped to one turn).  ``unpack_*`` raise ``Malformed``
+with the reason, whatever the bytes (tested by fuzzing).
 
 ``pack_*(..., raw=True)`` gives the message already serialized (little-endian
 CDR, the bytes rclpy would send) and ``unpack_*`` also take such bytes, from a
@@ -40,6 +42,7 @@ LIGHT, CMD_TURN, BEARING, EPISODE_START = 'light', 'cmd_turn', 'bearing', 'episo
 HEADER = 2                    # episode, step
 MAX_EPISODE = 2 ** 31         # episode ids and steps must fit cmd_turn's int32 header
 MAX_SEED = 2 ** 53            # seeds must be exact in a float64
+MAX_BEARING_DEG = 1e6         # start bearings wrap to one turn; far beyond, float64 noise
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                  reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
@@ -232,6 +235,8 @@ def unpack_episode_start(msg: Float64MultiArray | bytes
     bearing = None
     if values.shape[1] == 2:
         bearing = values[:, 1]
-        if not np.isfinite(bearing).all():
-            raise Malformed(f'{EPISODE_START}: start bearings must be finite degrees')
+        if not (np.abs(bearing) <= MAX_BEARING_DEG).all():      # NaN fails too
+            raise Malformed(f'{EPISODE_START}: start bearings must be finite degrees '
+                            f'within +-{MAX_BEARING_DEG:g}, got '
+                            f'{bearing[~(np.abs(bearing) <= MAX_BEARING_DEG)][0]}')
     return episode, seeds.astype(np.int64), bearing

@@ -17,7 +17,10 @@ command.  With no matching command after ``resend_timeout_s`` the last
 messages are published again (same tags), at most ``MAX_RESENDS`` times a step.
 After the last step only ``bearing`` (episode, steps) is published: it marks
 the end of the episode.  ``bearing`` is packed and published only while some
-node subscribes to it (the evolution needs only light and cmd_turn).
+node subscribes to it (the evolution needs only light and cmd_turn).  A
+backend that fails (raises, or gives readings outside the contract) ends the
+episode (``end_episode``): nothing of it is resent, and its commands are
+dropped as another episode's; the node keeps running.
 
 Real time: a timer at ``rate_hz`` steps the robots with the latest command
 received for the current episode (no command: no turn), like a physical robot
@@ -36,6 +39,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
+from ..core.khepera import DARK, SENSORS
 from ..core.task import Task
 from . import Dropped, protocol
 from .params import (GEOMETRY_SPECS, TASK_SPECS, Spec, check_choice, current, declare,
@@ -120,13 +124,20 @@ class RobotNode(Node):
         """Swap in new state; the task changes at the next episode, timing at once."""
         self.task = task_from(values)
         if changed & {'mode', 'rate_hz', 'resend_timeout_s'}:
-            if 'mode' in changed:
-                self.episode, self._last = None, []
+            if 'mode' in changed and self.episode is not None:
+                self.end_episode(f"mode changed to {values['mode']}")
             self._start_timer()
 
     def realtime_episode(self, count: int) -> tuple[int, int]:
         """(seed, robots) of the count-th episode the real-time mode starts by itself."""
         return count, 1
+
+    def end_episode(self, reason: str, error: bool = False) -> None:
+        """Forget the current episode, logging ``reason``: its last messages are not resent
+        and commands for it are dropped (other_episode)."""
+        message = reason if self.episode is None else f'episode {self.episode} ended: {reason}'
+        (self.get_logger().error if error else self.get_logger().warning)(message)
+        self.episode, self._last, self._pending_cmd = None, [], None
 
     # --- parameters ---------------------------------------------------------------------
 
@@ -170,13 +181,13 @@ class RobotNode(Node):
                 self._start(episode, seeds, bearing)
 
     def _start(self, episode: int, seeds, bearing, robots: int | None = None) -> None:
-        self.backend.task = self.task
         try:
+            self.backend.task = self.task
             readings = self.backend.reset(seeds, robots=robots or np.size(seeds),
                                           bearing_deg=bearing)
-        except (ValueError, RuntimeError, OSError) as exc:
-            self.episode, self._last = None, []
-            self.get_logger().error(f'episode {episode}: could not start: {exc}')
+            _check_readings(readings)
+        except Exception as exc:            # the backend is I/O: its failure ends an episode
+            self.end_episode(f'episode {episode} could not start: {exc}', error=True)
             return
         self.episode, self.step_index, self._pending_cmd = episode, 0, None
         self._publish(readings)
@@ -217,10 +228,10 @@ class RobotNode(Node):
     def _step(self, cmd: np.ndarray) -> None:
         try:
             readings = self.backend.step(cmd[:, 0], cmd[:, 1])
-        except (ValueError, RuntimeError, OSError) as exc:
-            self.get_logger().error(f'episode {self.episode} aborted at step '
-                                    f'{self.step_index}: {exc}')
-            self.episode, self._last = None, []
+            if readings is not None:
+                _check_readings(readings)
+        except Exception as exc:            # the backend is I/O: its failure ends an episode
+            self.end_episode(f'aborted at step {self.step_index}: {exc}', error=True)
             return
         self.step_index += 1
         self._publish(readings)
@@ -275,3 +286,14 @@ class RobotNode(Node):
                                             np.zeros(self._robots, np.int32)]))
             else:
                 self._step(batch.values)
+
+
+def _check_readings(readings) -> None:
+    """A backend's (8, B) readings must keep the light contract, else ValueError."""
+    shape = np.shape(readings)
+    if len(shape) != 2 or shape[0] != SENSORS or shape[1] < 1:
+        raise ValueError(f'the backend gave readings of shape {shape}, not ({SENSORS}, robots)')
+    low, high = np.min(readings), np.max(readings)
+    if not (low >= 0 and high <= DARK):                             # NaN fails both
+        raise ValueError(f'the backend gave readings outside [0, {DARK:g}] (or NaN): '
+                         f'{low} .. {high}')

@@ -5,6 +5,11 @@ SetParameters request from another node): the new world and noise model are
 swapped into the running episodes and apply from the next step; the task
 (steps, perturbations) from the next episode.  A value the core refuses is
 refused with its reason and the old value stays.
+
+``effects`` adds unmodelled effects (``gap.effects``, as ``khepera-noise
+diagnose`` fits them) to the robots, through ``gap.simulate.EffectEpisodes``;
+with none the episodes are exactly the core's.  A change applies from the next
+episode.
 """
 from __future__ import annotations
 
@@ -12,7 +17,9 @@ import sys
 from typing import Any
 
 from ..core.noise import DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, NoiseModel, format_groups
-from ..core.task import Episodes
+from ..core.task import Task
+from ..gap import effects as fx
+from ..gap.simulate import EffectEpisodes
 from . import spin_node
 from .params import GEOMETRY, SEED_MAX, Spec, noise_from, task_from, world_from
 from .robot_node import RobotNode
@@ -39,22 +46,42 @@ SIMULATOR_SPECS = (
     Spec('deg_per_power', 3.0, 'Rotation of one step at power 1, degrees, a multiple of 0.1 '
          '(power 9 turns 9 times as far).', 0.1, 40.0),
 )
+EFFECTS = Spec('effects', '', 'Unmodelled effects: a JSON list as khepera-noise diagnose '
+               'writes it; empty for none.')
+
+
+def effects_from(values: dict[str, Any]) -> tuple:
+    """The effects of the ``effects`` value, tried on one robot for two steps, so that a
+    value that parses but cannot run (a sensor beyond 7, a field of the wrong type) is
+    refused here rather than failing episodes; a ValueError names the problem."""
+    text = values['effects']
+    try:
+        effects = fx.loads(text)
+        trial = EffectEpisodes(world_from(values), noise_from(values), Task(steps=2), effects)
+        trial.reset(0, 1)
+        trial.step([1], [1])
+    except Exception as exc:                # a foreign JSON document can raise anything
+        raise ValueError(f'effects: {exc}' if isinstance(exc, ValueError) else
+                         f'effects {text[:80]!r} cannot be used: {exc!r}') from None
+    return effects
 
 
 class Simulator(RobotNode):
     """K simulated robots; see RobotNode for the protocol."""
 
-    EXTRA_SPECS = SIMULATOR_SPECS
+    EXTRA_SPECS = SIMULATOR_SPECS + (EFFECTS,)
 
     def __init__(self, node_name: str = 'simulator', **kwargs):
         super().__init__(node_name, **kwargs)
 
-    def make_backend(self, values: dict[str, Any]) -> Episodes:
-        return Episodes(world_from(values), noise_from(values), task_from(values))
+    def make_backend(self, values: dict[str, Any]) -> EffectEpisodes:
+        return EffectEpisodes(world_from(values), noise_from(values), task_from(values),
+                              fx.loads(values['effects']))
 
     def check_parameters(self, values: dict[str, Any]) -> None:
         super().check_parameters(values)
         noise_from(values)
+        effects_from(values)
 
     def apply_parameters(self, values: dict[str, Any], changed: set[str]) -> None:
         super().apply_parameters(values, changed)
@@ -62,6 +89,8 @@ class Simulator(RobotNode):
             self.backend.world = world_from(values)
         if changed & set(NOISE):
             self.backend.noise = noise_from(values)
+        if 'effects' in changed:
+            self.backend.effects = fx.loads(values['effects'])
 
     def realtime_episode(self, count: int) -> tuple[int, int]:
         return (self.values['seed'] + count) % (SEED_MAX + 1), self.values['robots']
