@@ -1,5 +1,9 @@
 """The bridge backend over the emulator's pseudo-terminals (no ROS)."""
 import logging
+import os
+import select
+import threading
+import tty
 
 import numpy as np
 import pytest
@@ -8,25 +12,35 @@ from khepera_noise_ros.core import baseline
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task
 from khepera_noise_ros.reality import emulator as emulator_module
+from khepera_noise_ros.reality import khepera_robot
+from khepera_noise_ros.reality import serial_protocol as sp
 from khepera_noise_ros.reality.effects import EffectsConfig
 from khepera_noise_ros.reality.emulator import Emulator
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots, \
-    RobotUnreachable
+    Replies, RobotUnreachable, SerialRobots, exchange, request
 from khepera_noise_ros.reality.world import EmulatedWorld
 
 QUIET = EffectsConfig.none(sensor_noise=0.0)
 TASK = Task(steps=12)
 
 
-def run(backend, seeds, bearing=None, policy=baseline.turn_toward_light):
-    """(readings (T, 8, B), bearings (T, B)) of one closed-loop episode."""
+def run(backend, seeds, bearing=None, policy=baseline.turn_toward_light, before_step=None):
+    """(readings (T, 8, B), bearings (T, B)) of one closed-loop episode;
+    ``before_step(t)`` is called before step t."""
     readings = backend.reset(seeds, bearing_deg=bearing)
     out, bearings = [], []
     while readings is not None:
         out.append(readings)
         bearings.append(backend.bearing_deg.copy())
+        if before_step is not None:
+            before_step(backend.step_index + 1)
         readings = backend.step(*policy(readings))
     return np.array(out), np.array(bearings)
+
+
+def in_process(seeds, start, world_seed=9):
+    return run(KheperaRobots(InProcessRobots(EmulatedWorld(seed=world_seed, robots=len(seeds))),
+                             task=TASK), seeds, start)
 
 
 @pytest.fixture
@@ -48,11 +62,89 @@ def test_serial_link_equals_the_world_driven_in_process():
         over_serial = run(backend, seeds, start)
         backend.close()
         served = em.served(0)
-    in_process = run(KheperaRobots(InProcessRobots(EmulatedWorld(seed=9, robots=2)),
-                                   task=TASK), seeds, start)
-    assert np.array_equal(over_serial[0], in_process[0])
-    assert np.allclose(over_serial[1], in_process[1], atol=1e-3)
+    direct = in_process(seeds, start)
+    assert np.array_equal(over_serial[0], direct[0])
+    assert np.allclose(over_serial[1], direct[1], atol=1e-3)
     assert served['O'] == TASK.steps and served['C'] >= TASK.steps
+    assert served['H'] == 0                     # an emulator's moves are over when it replies
+
+
+def test_a_lost_reply_to_a_move_that_the_next_move_supersedes_is_not_resent(caplog_warnings):
+    """On a perturbation step the turn and the knock go in one write; when the turn's reply
+    is lost the knock's target stands, so nothing is resent and no reading changes."""
+    seeds, start = [21, 22], [15.0, -40.0]
+
+    def garble_the_turn(step):
+        if step % TASK.perturb_every == 0:
+            em.inject(1, 'garbled')
+
+    with Emulator(EmulatedWorld(seed=9, robots=2)) as em:
+        backend = serial_backend(em)
+        over_serial = run(backend, seeds, start, before_step=garble_the_turn)
+        backend.close()
+    assert np.array_equal(over_serial[0], in_process(seeds, start)[0])
+    messages = [r.getMessage() for r in caplog_warnings.records if r.levelname == 'WARNING']
+    assert len(messages) == 2 and all('robot 1' in m and 'supersedes' in m for m in messages)
+
+
+def test_counters_are_zeroed_before_they_run_out_of_range(monkeypatch):
+    monkeypatch.setattr(khepera_robot, 'REZERO_PULSES', 300)
+    seeds, start = [21, 22], [15.0, -40.0]
+    with Emulator(EmulatedWorld(seed=9, robots=2)) as em:
+        backend = serial_backend(em)
+        over_serial = run(backend, seeds, start)
+        backend.close()
+        zeroed = em.served(0)['G']
+    assert zeroed > 1                           # at the start, and on the way
+    assert np.array_equal(over_serial[0], in_process(seeds, start)[0])
+
+
+@pytest.fixture
+def fake_robots():
+    """Three pseudo-terminals with nobody behind them: the test plays the robots."""
+    pairs = [os.openpty() for _ in range(3)]
+    for _, slave in pairs:
+        tty.setraw(slave)
+    yield [master for master, _ in pairs], [os.ttyname(slave) for _, slave in pairs]
+    for fd in sum(pairs, ()):
+        os.close(fd)
+
+
+def read_line(fd) -> bytes:
+    line = b''
+    while not line.endswith(b'\r'):
+        assert select.select([fd], [], [], 2.0)[0], f'nothing more after {line!r}'
+        line += os.read(fd, 1)
+    return line
+
+
+def test_every_robot_is_sent_its_command_before_any_reply_is_awaited(fake_robots):
+    masters, ports = fake_robots
+    links = SerialRobots(ports, timeout_s=5.0).links
+    result = {}
+    host = threading.Thread(target=lambda: result.update(
+        exchange({link: [request('O'), request('H')] for link in links})))
+    host.start()
+    try:
+        heard = [read_line(m) + read_line(m) for m in masters]     # nobody has answered yet
+        for i, master in reversed(list(enumerate(masters))):
+            os.write(master, sp.format_reply('O', *range(i, i + 8)) + sp.format_reply('H', i, -i))
+    finally:
+        host.join(10.0)
+    assert heard == [b'O\rH\r'] * 3
+    assert [result[link] for link in links] == [[tuple(range(i, i + 8)), (i, -i)]
+                                                for i in range(3)]
+    for link in links:
+        link.close()
+
+
+def test_replies_are_matched_to_their_commands_in_order():
+    replies = Replies([request('G', 0, 0), request('O'), request('H'), request('D', 0, 0)])
+    assert not replies.feed(b'o,1,2,3,4,5,6,7,8\r\nh,1')        # 'g' lost, 'h' half there
+    assert replies.feed(b',2\r\n~\r\nd\r\n')                      # a garbled extra line is not
+    assert replies.outcomes[0].startswith('no complete reply')   # taken for the next reply
+    assert replies.outcomes[1:3] == [((1, 2, 3, 4, 5, 6, 7, 8),), ((1, 2),)]
+    assert replies.outcomes[3].startswith('garbled reply') and replies.pending == b'd\r\n'
 
 
 def test_perturbations_are_the_simulators():
@@ -85,7 +177,7 @@ def test_an_unreachable_robot_fails_the_episode_and_stops(caplog_warnings):
     with Emulator(EmulatedWorld(robots=1)) as em:
         backend = serial_backend(em, retries=1)
         backend.reset([1])
-        em.inject(0, 'garbled', count=2)
+        em.inject(0, 'garbled', count=6)        # a step sends C, O and Z,R: each fails twice
         with pytest.raises(RobotUnreachable, match='robot 0 .* failed 2 times'):
             backend.step([1], [5])
         assert backend.failed and backend.done
@@ -127,6 +219,7 @@ def test_a_real_robot_is_never_sent_emulator_commands(monkeypatch, caplog_warnin
         backend.step([1], [2])
         backend.close()
         assert backend.bearing_deg is None and em.served(0)['Z'] == 0
+        assert em.served(0)['H'] > 0                # a real robot is watched until it arrives
     assert any('sets the heading by hand' in r.getMessage() for r in caplog_warnings.records)
 
 

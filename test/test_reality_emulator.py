@@ -1,5 +1,6 @@
 """The robot emulator on pseudo-terminals: in-process and as `khepera-noise emulate`."""
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -88,6 +89,36 @@ def test_injected_faults_break_exactly_the_next_reply(emulator, fault):
     else:
         with pytest.raises(sp.ProtocolError):
             sp.parse_reply(first, 'H')
+
+
+def test_commands_waiting_together_are_answered_together(monkeypatch):
+    """Robots written to before the emulator looks are one round: one reading of the world
+    for all of them, the same values as one at a time; a robot alone still gets its reply."""
+    world = EmulatedWorld(seed=3, robots=3)
+    rounds = []
+    read = world.read
+    monkeypatch.setattr(world, 'read', lambda rows: rounds.append(list(rows)) or read(rows))
+    emulator = Emulator(world)
+    ports = [open_port(path) for path in emulator.ports]
+    try:
+        for port in ports:
+            port.write(b'O\rZ,R\r')
+        masters = [robot.master for robot in emulator.robots]
+        deadline = time.monotonic() + 5
+        while len(select.select(masters, [], [], 0.1)[0]) < 3 and time.monotonic() < deadline:
+            pass                                # until the kernel has passed every line on
+        emulator.start()
+        together = [sp.parse_reply(port.read_until(b'\n'), 'O') for port in ports]
+        assert [sp.parse_z_reply(port.read_until(b'\n'), 'R') for port in ports] == [(0.0,)] * 3
+        alone = sp.parse_reply(talk(ports[1], b'O\r'), 'O')
+    finally:
+        for port in ports:
+            port.close()
+        emulator.stop()
+    assert rounds == [[0, 1, 2], [1]]
+    one_by_one = EmulatedWorld(seed=3, robots=3)
+    assert together == [tuple(one_by_one.read(i)) for i in range(3)]
+    assert alone == tuple(one_by_one.read(1))
 
 
 def test_unplug_and_stop_remove_the_devices():

@@ -48,6 +48,25 @@ def test_replies_round_trip():
     assert sp.parse_z_reply(sp.format_z_reply('L'), 'L') == ()
 
 
+@pytest.mark.parametrize('line, letter', [
+    (b'o,0,1,1023,+7,0042,5,6,7\r\n', 'O'), (b'h,-2147483648,2147483647\r\n', 'H'),
+    (b'c\r\n', 'C'), (b'o,1,2,3,4,5,6,7,1024\r\n', 'O'), (b'h,1,2147483648\r\n', 'H')])
+def test_replies_in_the_usual_form_parse_as_any_other(line, letter):
+    """Bytes in the form the emulator writes take a shortcut; text takes the general path;
+    both accept and refuse the same lines."""
+    try:
+        expected = sp.parse_reply(line.decode(), letter)
+    except sp.ProtocolError as exc:
+        with pytest.raises(sp.ProtocolError) as refused:
+            sp.parse_reply(line, letter)
+        assert str(refused.value) == str(exc)
+    else:
+        assert sp.parse_reply(line, letter) == expected
+    assert sp.parse_z_reply(b'z,r,-12.250\r\n', 'R') == sp.parse_z_reply('z,r,-12.250', 'R')
+    assert sp.parse_command(b'C,+5,-0005') == sp.parse_command('C,+5,-0005') == \
+        sp.Command('C', (5, -5))
+
+
 @pytest.mark.parametrize('line, letter, words', [
     (b'o,1,2,3,4,5,6,7\r\n', 'O', 'has 8 values, got 7'),          # short
     (b'o,1,2,3,4,5,6,7,8,9\r\n', 'O', 'has 8 values, got 9'),

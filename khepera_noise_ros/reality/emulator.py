@@ -11,7 +11,14 @@ Besides the robot's commands it answers ``Z``, the experimenter's extension:
 ``Z,L,<lamp_distance_mm>,<ambient>`` sets the lighting condition,
 ``Z,B,<deg>`` puts the lamp at a bearing and ``Z,R`` reports the true bearing.
 Its answer to ``B`` names protocol ``emulator``, which is how a bridge knows it
-may use them.  A line it cannot execute is answered ``?,<reason>``.
+may use them, and that a move is over when ``C`` is answered.  A line it cannot
+execute is answered ``?,<reason>``.
+
+Commands are answered in the order each robot sent them, and all robots'
+commands waiting at one time together: the n-th line of every robot is one
+round, whose light readings and turns are one call to the world (a robot's
+readings depend only on its own commands, so this changes no value).  A
+robot's replies go back in one write.
 
 ``inject`` makes the next replies of a robot fail (silent, garbled or short)
 and ``unplug`` makes its device disappear, to exercise a bridge's fault
@@ -32,7 +39,9 @@ from . import serial_protocol as sp
 from .world import Condition, EmulatedWorld
 
 VERSION = ('5.02', 'emulator')
+READ_BEARING = sp.Command('Z', (sp.Z_READ_BEARING,))
 FAULTS = ('silent', 'garbled', 'short')
+GATHER_S = 0.002                # longest wait for the rest of a batch of commands
 
 
 class _Robot:
@@ -41,6 +50,7 @@ class _Robot:
     def __init__(self, index: int):
         self.index = index
         self.buffer = b''
+        self.lines: deque[bytes] = deque()      # commands received, not yet answered
         self.counters = np.zeros(2)             # position counters, pulses (fractional)
         self.speeds = np.zeros(2)               # pulses per 10 ms
         self.since = time.monotonic()
@@ -65,6 +75,7 @@ class Emulator:
         self._wake_r, self._wake_w = os.pipe()
         self._unplugged: set[int] = set()
         self._thread: threading.Thread | None = None
+        self._expected: set[_Robot] = set()     # the robots answered together last time
         self.robots = [self._open_pty(_Robot(i)) for i in range(world.robots)]
 
     @staticmethod
@@ -130,12 +141,13 @@ class Emulator:
             for robot in self.robots:
                 selector.register(robot.master, selectors.EVENT_READ, robot)
             while not self._stop.is_set():
-                for key, _ in selector.select(timeout=0.5):
-                    if key.data is None:
-                        os.read(self._wake_r, 64)
-                        self._unplug_pending(selector)
-                    else:
-                        self._receive(key.data, selector)
+                ready = [key.data for key, _ in selector.select(timeout=0.5)]
+                if None in ready:
+                    os.read(self._wake_r, 64)
+                    self._unplug_pending(selector)
+                heard = [robot for robot in ready if isinstance(robot, _Robot)
+                         and self._receive(robot, selector)]
+                self._answer_waiting(self._gather(heard, selector))
 
     def _unplug_pending(self, selector) -> None:
         with self._lock:
@@ -146,72 +158,140 @@ class Emulator:
                 selector.unregister(robot.master)
                 self._close_robot(robot)
 
-    def _receive(self, robot: _Robot, selector) -> None:
+    def _receive(self, robot: _Robot, selector) -> bool:
+        """Read what ``robot``'s host sent; True if it holds complete command lines."""
         if robot.master < 0:                     # unplugged earlier in this round
-            return
+            return False
         try:
             data = os.read(robot.master, 4096)
         except BlockingIOError:
-            return
+            return False
         except OSError:
             data = b''
         if not data:                             # the device is gone
             selector.unregister(robot.master)
             self._close_robot(robot)
-            return
+            return False
         robot.buffer += data.replace(b'\n', b'\r')
         *lines, robot.buffer = robot.buffer.split(b'\r')
-        for line in lines:
-            if line:
-                self._reply(robot, self.answer(robot.index, line))
+        robot.lines.extend(line for line in lines if line)
+        return bool(robot.lines)
 
-    def _reply(self, robot: _Robot, reply: bytes) -> None:
+    def _gather(self, heard: list[_Robot], selector) -> list[_Robot]:
+        """``heard`` and the robots that join them shortly: a host that drives several
+        robots writes to them one after the other, and the robots answered together last
+        time are expected together again, for at most ``GATHER_S``."""
+        if not heard:
+            return heard
+        deadline = time.monotonic() + GATHER_S
+        while not self._expected <= set(heard):
+            left = deadline - time.monotonic()
+            ready = [key.data for key, _ in selector.select(timeout=left)] if left > 0 else []
+            if not ready or not all(isinstance(robot, _Robot) for robot in ready):
+                break                       # time is up, or the loop has other work
+            for robot in ready:
+                if self._receive(robot, selector) and robot not in heard:
+                    heard.append(robot)
+        self._expected = set(heard)
+        return heard
+
+    def _answer_waiting(self, robots: list[_Robot]) -> None:
+        """Answer every waiting line of ``robots``, a round at a time; one write each."""
+        replies: dict[_Robot, list[bytes]] = {robot: [] for robot in robots}
+        while robots:
+            round_ = [(robot, robot.lines.popleft()) for robot in robots]
+            for (robot, _), reply in zip(round_, self._answer_round(round_)):
+                replies[robot].append(self._faulty(robot, reply))
+            robots = [robot for robot in robots if robot.lines]
+        for robot, lines in replies.items():
+            try:
+                os.write(robot.master, b''.join(lines))
+            except OSError:                      # nobody reads, or the device is gone
+                pass
+
+    def _faulty(self, robot: _Robot, reply: bytes) -> bytes:
+        """``reply`` as it reaches the host: lost, garbled or cut short by a fault."""
         with self._lock:
             fault = robot.faults.popleft() if robot.faults else None
         if fault is None and self.fault_rate and self._rng.random() < self.fault_rate:
             fault = FAULTS[self._rng.integers(len(FAULTS))]
         if fault == 'silent':
-            return
+            return b''
         body = bytearray(reply[:-len(sp.LINE_END)])
         if fault == 'garbled':                   # one byte in the middle corrupted
             body[len(body) // 2] = ord('~')
-            reply = bytes(body) + sp.LINE_END
-        elif fault == 'short':                   # the second half lost
-            reply = bytes(body[:len(body) // 2]) + sp.LINE_END
-        try:
-            os.write(robot.master, reply)
-        except OSError:                          # nobody reads, or the device is gone
-            pass
+            return bytes(body) + sp.LINE_END
+        if fault == 'short':                     # the second half lost
+            return bytes(body[:len(body) // 2]) + sp.LINE_END
+        return reply
 
     # --- the protocol -------------------------------------------------------------------
 
     def answer(self, index: int, line: bytes) -> bytes:
         """The reply of robot ``index`` to one command line."""
-        robot = self.robots[index]
-        try:
-            command = sp.parse_command(line)
-        except sp.ProtocolError as exc:
-            return sp.format_error(str(exc))
+        return self._answer_round([(self.robots[index], line)])[0]
+
+    def _answer_round(self, round_: list[tuple[_Robot, bytes]]) -> list[bytes]:
+        """Replies to one line each of distinct robots; their reads and position moves
+        are one call to the world each."""
+        commands = []
+        for robot, line in round_:
+            try:
+                commands.append(sp.parse_command(line))
+            except sp.ProtocolError as exc:
+                commands.append(sp.format_error(str(exc)))
         with self._lock:
-            robot.served[command.letter] += 1
-        self._advance(robot)
+            for (robot, _), command in zip(round_, commands):
+                if isinstance(command, sp.Command):
+                    robot.served[command.letter] += 1
+        replies, reads, turns, bearings = list(commands), [], [], []
+        for k, ((robot, _), command) in enumerate(zip(round_, commands)):
+            if not isinstance(command, sp.Command):
+                continue
+            self._advance(robot)
+            if command.letter == 'O':
+                reads.append(k)
+            elif command.letter == 'C':
+                turns.append(self._position_move(robot, command.args))
+                replies[k] = sp.format_reply('C')
+            elif command == READ_BEARING:
+                bearings.append(k)
+            else:
+                replies[k] = self._execute(robot, command)
+        turns = [(index, deg) for index, deg in turns if deg]
+        if turns:
+            self.world.turn([deg for _, deg in turns], [index for index, _ in turns])
+        if reads:
+            rows = [round_[k][0].index for k in reads]
+            for k, values in zip(reads, self.world.read(rows).tolist()):
+                replies[k] = sp.format_reply('O', *values)
+        if bearings:
+            truth = self.world.bearing_deg
+            for k in bearings:
+                replies[k] = sp.format_z_reply(sp.Z_READ_BEARING, truth[round_[k][0].index])
+        return replies
+
+    def _execute(self, robot: _Robot, command: sp.Command) -> bytes:
+        """The reply to a command other than O and C."""
         letter, args = command.letter, command.args
         if letter == 'B':
             return sp.format_reply('B', *VERSION)
-        if letter == 'O':
-            return sp.format_reply('O', *self.world.read(index))
         if letter == 'H':
             return sp.format_reply('H', *np.rint(robot.counters))
         if letter == 'G':
             robot.counters[:] = args
         elif letter == 'D':
             robot.speeds[:] = args
-        elif letter == 'C':
-            robot.speeds[:] = 0.0
-            self._move(robot, np.asarray(args, np.float64) - robot.counters)
         elif letter == 'Z':
-            return self._experimenter(index, args)
+            return self._experimenter(robot.index, args)
         return sp.format_reply(letter)
+
+    def _position_move(self, robot: _Robot, target: tuple) -> tuple[int, float]:
+        """Stop the wheels and set the counters to ``target``; (robot, degrees to turn)."""
+        robot.speeds[:] = 0.0
+        travel = np.asarray(target, np.float64) - robot.counters
+        robot.counters += travel
+        return robot.index, self.wheels.rotation_deg(*travel)
 
     def _experimenter(self, index: int, args: tuple) -> bytes:
         sub, values = args[0], args[1:]

@@ -90,6 +90,13 @@ ARGUMENTS = {
 REPLY_FIELDS = {'D': 0, 'G': 0, 'C': 0, 'H': 2, 'O': SENSORS}
 Z_ARGUMENTS = {Z_BEARING: 1, Z_LIGHT: 2, Z_READ_BEARING: 0}
 
+# Lines in the form this module writes them, recognised in one match; the field-by-field
+# checks (and their messages) are for everything else.
+_FAST_COMMAND = re.compile(rb'([%s])((?:,[-+]?[0-9]+)*)\Z' % ''.join(ARGUMENTS).encode())
+_FAST_REPLY = {letter: re.compile(rb'%s(?:,[-+]?[0-9]+){%d}\r\n\Z' % (letter.lower().encode(), n))
+               for letter, n in REPLY_FIELDS.items()}
+_FAST_BEARING = re.compile(rb'z,r,([-+]?[0-9]+\.[0-9]+)\r\n\Z')
+
 
 def _decode(line) -> str:
     if isinstance(line, (bytes, bytearray)):
@@ -121,12 +128,17 @@ def format_command(letter: str, *args) -> bytes:
     """``format_command('D', 5, -5)`` -> ``b'D,5,-5\\r'``; arguments are checked."""
     if letter == 'Z':
         text = ','.join(['Z'] + [args[0]] + [_number(a) for a in args[1:]])
+        parse_command(text)                   # the same checks the robot applies
     else:
         if letter not in ARGUMENTS:
             raise ValueError(f'unknown Khepera command {letter!r}; known: '
                              f'{sorted(ARGUMENTS) + ["Z"]}')
-        text = ','.join([letter] + [str(int(a)) for a in args])
-    parse_command(text)                       # the same checks the robot applies
+        values = [int(a) for a in args]
+        text = ','.join([letter] + [str(v) for v in values])
+        ranges = ARGUMENTS[letter]
+        if len(values) != len(ranges) or not all(low <= v <= high for v, (low, high)
+                                                 in zip(values, ranges)):
+            parse_command(text)               # raises, naming what is wrong
     return text.encode('ascii') + COMMAND_END
 
 
@@ -136,6 +148,14 @@ def _number(value) -> str:
 
 def parse_command(line) -> Command:
     """The robot's side: a command line to a Command, or ProtocolError."""
+    if isinstance(line, bytes):
+        fast = _FAST_COMMAND.match(line)
+        if fast:
+            letter = fast[1].decode()
+            values, ranges = tuple(map(int, fast[2].split(b',')[1:])), ARGUMENTS[letter]
+            if len(values) == len(ranges) and all(low <= v <= high for v, (low, high)
+                                                  in zip(values, ranges)):
+                return Command(letter, values)
     text = _decode(line)
     parts = text.split(',')
     letter = parts[0]
@@ -181,8 +201,13 @@ def format_z_reply(sub: str, *values: float) -> bytes:
 
 def parse_reply(line, letter: str) -> tuple[int, ...]:
     """Integer fields of the reply to command ``letter``; ProtocolError if it is not one."""
-    text = _decode(line)
     count = REPLY_FIELDS[letter]
+    if isinstance(line, bytes) and _FAST_REPLY[letter].match(line):
+        values = tuple(map(int, line[2:-2].split(b','))) if count else ()
+        low, high = (0, READING_MAX) if letter == 'O' else (-COUNTER_MAX - 1, COUNTER_MAX)
+        if not values or (low <= min(values) and max(values) <= high):
+            return values
+    text = _decode(line)
     parts = text.split(',')
     if parts[0] != letter.lower():
         raise ProtocolError(f'expected a reply to {letter} starting {letter.lower()!r}, '
@@ -206,6 +231,10 @@ def parse_version(line) -> tuple[str, str]:
 
 def parse_z_reply(line, sub: str) -> tuple[float, ...]:
     """Values of the emulator's reply to ``Z,<sub>``."""
+    if sub == Z_READ_BEARING and isinstance(line, bytes):
+        fast = _FAST_BEARING.match(line)
+        if fast and math.isfinite(float(fast[1])):
+            return (float(fast[1]),)
     text = _decode(line)
     parts = text.split(',')
     count = 1 if sub == Z_READ_BEARING else 0
