@@ -216,7 +216,9 @@ def _reality(config: settings.ReplicateConfig, ros, ports) -> tuple:
         return (chunked(lambda g, s: play(robots, g, s)[0], capacity),
                 chunked_trace(lambda g, s: play(robots, g, s)[1], capacity),
                 f'the emulated world in process ({_effects_text(config)})')
-    bridge = ros.bridge(config, ports)
+    # on a loaded machine an emulator reply can come late; a resend would read a new sample
+    bridge = ros.bridge(config, ports, timeout_s=2.0 if config.backend['reality'] == 'emulator'
+                        else None)
     text = (f'the robot emulator ({len(ports)} robots on pseudo-terminals, '
             f'{_effects_text(config)}) through the hardware bridge node'
             if config.backend['reality'] == 'emulator'
@@ -295,12 +297,14 @@ class _Ros:
                             parameter_overrides=overrides(RobotNode.parameter_specs(), values)))
         return self._evaluator(namespace, 'simulator')
 
-    def bridge(self, config: settings.ReplicateConfig, ports):
+    def bridge(self, config: settings.ReplicateConfig, ports, timeout_s: float | None = None):
         """The hardware bridge node on ``ports``, a controller, and their evaluator."""
         from ..nodes.hardware_bridge import HardwareBridge
         from ..nodes.params import overrides
         namespace = f'{self.prefix}/reality'
         values = {**config.data['task'], **config.data['world'], 'ports': list(ports)}
+        if timeout_s is not None:
+            values['timeout_s'] = timeout_s
         self._add(HardwareBridge(context=self.context, namespace=namespace,
                                  parameter_overrides=overrides(HardwareBridge.parameter_specs(),
                                                                values)))
