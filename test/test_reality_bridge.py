@@ -242,3 +242,25 @@ def test_an_episode_survives_a_noisy_line(caplog_warnings):
         backend.close()
     assert readings.shape == (TASK.steps, 8, 2) and not backend.failed
     assert any('retrying' in r.getMessage() for r in caplog_warnings.records)
+
+
+def test_a_reply_that_comes_after_its_timeout_is_not_taken_for_the_next_one(fake_robots):
+    """The robot answers the first O too late: the retry must get its own reply, not the
+    late one (the link resynchronises with B, whose reply nothing else can be taken for)."""
+    masters, ports = fake_robots
+    (link,) = SerialRobots(ports[:1], timeout_s=0.3, retries=1).links
+    result = {}
+    host = threading.Thread(target=lambda: result.update(exchange({link: [request('O')]})))
+    host.start()
+    try:
+        master = masters[0]
+        assert read_line(master) == b'O\r'
+        assert read_line(master) == b'B\r'          # sent once the first O timed out
+        os.write(master, sp.format_reply('O', *range(8)))            # the late reply
+        os.write(master, sp.format_reply('B', *emulator_module.VERSION))
+        assert read_line(master) == b'O\r'
+        os.write(master, sp.format_reply('O', *range(10, 18)))
+    finally:
+        host.join(10.0)
+        link.close()
+    assert result[link] == [tuple(range(10, 18))]

@@ -304,13 +304,32 @@ class SerialLink:
                                              timeout=self.settings.timeout_s,
                                              write_timeout=self.settings.timeout_s)
             elif self.stale:
-                self._serial.reset_input_buffer()
+                self._drain()
             self.stale = False
             self._write(data)
         except PORT_ERRORS as exc:
             self.close()
             return f'serial port failed ({exc})'
         return None
+
+    def _drain(self) -> None:
+        """Resynchronise after an exchange went wrong.  A reply still on its way would be
+        read as the answer to the next command and shift every reply after it, so send
+        B and throw away everything before its (unmistakable) reply."""
+        self._serial.reset_input_buffer()
+        self._write(IDENTIFY.command)
+        deadline, pending = time.monotonic() + self.settings.timeout_s, b''
+        while (left := deadline - time.monotonic()) > 0:
+            if not select.select([self.fileno()], [], [], left)[0]:
+                return
+            pending += self.receive()
+            *lines, pending = pending.split(b'\n')
+            for line in lines:
+                try:
+                    IDENTIFY.parse(line + b'\n')
+                    return
+                except sp.ProtocolError:
+                    continue        # a late reply to a command that was given up on
 
     def _write(self, data: bytes) -> None:
         try:
