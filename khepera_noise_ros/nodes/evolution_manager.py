@@ -3,18 +3,21 @@
 It runs ``core.evolution`` (phase 1: 25 x 50 generations from a random start;
 phase 2: 10 x 5 seeded with a phase-1 best) with a GraphEvaluator as the
 fitness function: genomes go to the controller as a parameter, episodes run
-on whichever robot node ``robot_namespace`` points at, and fitness is
-computed from the readings and commands seen on the topics.  ``trials``
-independent runs evolve together, so each lockstep step carries one robot per
-trial; trial i uses the EA seed ``seed + i``.  It
-publishes the best fitness of every generation on ``best_fitness`` and writes a
-JSON record at the end.
-With the same seeds the result equals core.evolution with CoreEvaluator.
+on the robot node ``robot_namespace`` points at, or are split across the
+worker pairs ``workers`` names, and fitness is computed from the readings and
+commands seen on the topics.  ``trials`` independent runs evolve together, so
+each lockstep step carries one robot per trial; trial i uses the EA seed
+``seed + i``.  It publishes the best fitness of every generation on
+``best_fitness``, checkpoints after every generation (a restarted manager
+resumes where it stopped; see ``checkpoint``) and writes a JSON record at the end.
+With the same seeds the result equals core.evolution with CoreEvaluator,
+whatever the number of workers and however often the run was interrupted.
 """
 from __future__ import annotations
 
 from dataclasses import asdict, replace
 import json
+import os
 from pathlib import Path
 import sys
 import threading
@@ -33,8 +36,10 @@ from ..core.evolution import BEST_MODES, FITNESS_MODES, PHASE1, PHASE2, EAConfig
 from ..core.network import GENES, check_genomes
 from ..files import write_json
 from . import spin_node
+from .checkpoint import Checkpoint, checkpoint_path
 from .graph import GraphEvaluator
 from .params import SEED_MAX, Spec, check_choice, current, declare, proposed
+from .workers import is_pattern
 
 FORMAT = 'khepera-noise-evolution/1'
 BEST_FITNESS = 'best_fitness'
@@ -61,16 +66,31 @@ MANAGER_SPECS = (
     Spec('seed_results', '', 'A results JSON of an earlier run whose best genome(s) seed the '
          'population (one per trial if it has as many trials, else its overall best).'),
     Spec('robot_namespace', '', 'Namespace of the robot node topics (light, cmd_turn, '
-         'bearing, episode_start); empty: this node\'s namespace.', read_only=True),
+         'bearing, episode_start); empty: this node\'s namespace. Ignored when workers is '
+         'set.', read_only=True),
+    Spec('workers', [], 'Namespaces of the worker pairs (robot node + controller) that share '
+         'the evaluations, e.g. [/w0, /w1]; fnmatch patterns such as /w* take every matching '
+         'pair found in the ROS graph, before every batch. Empty: the pair in '
+         'robot_namespace. Fixed at start.', type_=Parameter.Type.STRING_ARRAY),
+    Spec('worker_capacity', 0, 'Most robots in one episode on a worker; a larger share is '
+         'run as several episodes. 0: no limit but the ports a hardware bridge has.',
+         0, 1000000),
     Spec('robot_node', '', 'Name of the robot node (for its steps parameter); empty: the '
          'node that publishes light.', read_only=True),
     Spec('controller_node', '', 'Name of the controller node whose genomes parameter is set; '
          'empty: <robot_namespace>/controller.', read_only=True),
     Spec('results_path', 'evolution_results.json', 'Where the JSON record is written at the '
          'end (atomically); empty: not written.'),
-    Spec('stall_timeout_s', 2.0, 'An episode with no new message for this long is started '
-         'again under a new id with the same seeds.', 0.01, 3600.0),
-    Spec('max_retries', 3, 'Restarts of one episode before the evolution fails.', 0, 1000),
+    Spec('checkpoint_path', '', 'Where the run is checkpointed after every generation '
+         '(atomically; removed at the end); empty: beside results_path as '
+         '<name>.checkpoint.json, or no checkpoint when results_path is empty too.'),
+    Spec('resume', True, 'Continue from the checkpoint when one of the same configuration '
+         'exists (one of another configuration fails the start); false: start afresh and '
+         'overwrite it.'),
+    Spec('stall_timeout_s', 2.0, 'An episode with no new message for this long has failed: it '
+         'is started again under a new id with the same seeds, on the other workers (this one '
+         'leaves the pool) when there are any.', 0.01, 3600.0),
+    Spec('max_retries', 3, 'Failures of one episode before the evolution fails.', 0, 1000),
     Spec('ready_timeout_s', 30.0, 'How long to wait for the robot node and controller.',
          0.0, 86400.0),
 )
@@ -134,16 +154,20 @@ class EvolutionManager(Node):
         self.values = current(self, MANAGER_SPECS)
         self.check_parameters(self.values)
         v = self.values
+        single = {} if v['workers'] else dict(
+            robot_namespace=v['robot_namespace'], controller_node=v['controller_node'],
+            robot_node=v['robot_node'])
         self.evaluator = GraphEvaluator(
-            self, robot_namespace=v['robot_namespace'], controller_node=v['controller_node'],
-            robot_node=v['robot_node'], stall_timeout_s=v['stall_timeout_s'],
-            max_retries=v['max_retries'], bearings=bearings)
+            self, stall_timeout_s=v['stall_timeout_s'], max_retries=v['max_retries'],
+            bearings=bearings, workers=list(v['workers']), capacity=v['worker_capacity'],
+            **single)
         self._best_pub = self.create_publisher(Float64, BEST_FITNESS, 10)
         self.results: dict | None = None
         self.finished: Future | None = None
         self._worker: threading.Thread | None = None
         self._published = 0
         self._counts = (0, 0)
+        self._before: dict = {}             # episodes and time of the runs a checkpoint holds
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
 
@@ -152,19 +176,31 @@ class EvolutionManager(Node):
         ea_config(values)
         if len(values['seed_genome']):
             _one_genome(values['seed_genome'])
+        workers = list(values['workers'])
+        for namespace in workers:
+            if not namespace.strip() or namespace != namespace.strip() or (
+                    not is_pattern(namespace) and workers.count(namespace) > 1):
+                raise ValueError(f'workers must be distinct namespaces or patterns without '
+                                 f'spaces, got {workers}')
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
         try:
+            if any(p.name == 'workers' for p in params):
+                # not declared read_only only because params.declare cannot give a
+                # read-only parameter an empty-list default
+                raise ValueError('workers is fixed at start (-p workers:=[...]); it cannot '
+                                 'be changed while the node runs')
             self.check_parameters(proposed(self, MANAGER_SPECS, params))
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _post_set(self, params: list[Parameter]) -> None:
-        """The timeouts apply at once, the rest at the next start()."""
+        """The timeouts and the capacity apply at once, the rest at the next start()."""
         self.values = current(self, MANAGER_SPECS)
         self.evaluator.stall_timeout_s = self.values['stall_timeout_s']
         self.evaluator.max_retries = self.values['max_retries']
+        self.evaluator.capacity = self.values['worker_capacity']
 
     # --- running ------------------------------------------------------------------------
 
@@ -186,40 +222,96 @@ class EvolutionManager(Node):
             future.set_exception(exc)
 
     def run(self) -> dict:
-        """Evolve to the end, publish and log progress, write and return the record."""
+        """Evolve to the end (from the checkpoint of an interrupted run of the same
+        configuration, if there is one), publish and log progress, write and return the
+        record."""
         v = dict(self.values)
         config, seeds = ea_config(v), seed_genomes(v)
         started = time.monotonic()
-        self.evaluator.wait_ready(v['ready_timeout_s'])
-        robot = self._robot_record()
         eas = [SteadyStateEA(config, seed=s, seed_genome=g)
                for s, g in zip(trial_seeds(v['seed'], v['trials']), seeds)]
+        checkpoint = self._checkpoint(v, config, eas)
+        self.evaluator.wait_ready(v['ready_timeout_s'])
+        robot = self._robot_record()
         self.get_logger().info(
             f'evolving {len(eas)} trial(s): population {config.population}, '
-            f'{config.generations} generations, robot node {self.evaluator.robot_node}')
+            f'{config.generations} generations, on {self._where()}')
         self._published = 0
         self._counts = (self.evaluator.episodes, self.evaluator.restarts)
-        evolve(eas, self.evaluator, progress=self._progress)
-        self.results = self._record(v, config, eas, robot, time.monotonic() - started)
+        evaluate = self.evaluator if checkpoint is None else checkpoint.evaluator(self.evaluator)
+        evolve(eas, evaluate,
+               progress=lambda eas: self._progress(eas, checkpoint, started))
+        self.results = self._record(v, config, eas, robot, self._wall_time(started),
+                                    checkpoint)
         if v['results_path']:
             write_json(v['results_path'], self.results)
             self.get_logger().info(f"results written to {v['results_path']}")
+        if checkpoint is not None:
+            checkpoint.remove()
         self.get_logger().info(f"best fitness {self.results['best_fitness']:.4f} (trial "
                                f"{self.results['best_trial']}, generation "
                                f"{self.results['best_generation']})")
         return self.results
 
+    def _where(self) -> str:
+        workers = self.evaluator.workers
+        if len(workers) == 1 and not self.evaluator.patterns:
+            return f'robot node {self.evaluator.robot_node}'
+        return f'workers {sorted(workers)}' + (
+            f' and any matching {self.evaluator.patterns}' if self.evaluator.patterns else '')
+
+    def _checkpoint(self, v: dict, config: EAConfig, eas: list[SteadyStateEA]
+                    ) -> Checkpoint | None:
+        """The run's checkpoint, loaded when it holds an interrupted run of this
+        configuration and ``resume`` is set."""
+        path = checkpoint_path(v['results_path'], v['checkpoint_path'])
+        self._before = {}
+        if path is None:
+            return None
+        identity = {**self._config(v, config), 'seed_genomes': [
+            None if ea.seed_genome is None else ea.seed_genome.tolist() for ea in eas]}
+        identity.pop('seed_results')        # the genomes it held count, not the path
+        checkpoint = Checkpoint(path, identity)
+        if v['resume'] and checkpoint.load():
+            self._before = checkpoint.state
+            self.get_logger().warning(
+                f"resuming from checkpoint {path}: generation {checkpoint.state['generation']}"
+                f' of {config.generations} done, {checkpoint.loaded} batches recorded')
+        return checkpoint
+
     def _robot_record(self) -> dict:
+        """The first worker's robot node and parameters; a warning for every other worker
+        whose parameters differ (its episodes would not be the same)."""
+        evaluator = self.evaluator
         try:
-            parameters = self.evaluator.robot_parameters()
+            parameters = evaluator.robot_parameters()
         except TimeoutError as exc:
             self.get_logger().warning(f'the results will not list the robot parameters: {exc}')
             parameters = None
-        return {'node': self.evaluator.robot_node, 'parameters': parameters}
+        for worker in list(evaluator.workers.values())[1:]:
+            try:
+                theirs = evaluator.robot_parameters(worker=worker)
+            except TimeoutError:
+                continue
+            differ = sorted(k for k in set(theirs) | set(parameters or {})
+                            if (parameters or {}).get(k) != theirs.get(k))
+            if parameters is not None and differ:
+                self.get_logger().warning(
+                    f'{worker.robot_node} has other parameters than {evaluator.robot_node}: '
+                    f'{", ".join(differ)}; results depend on the split if these matter')
+        return {'node': evaluator.robot_node, 'parameters': parameters}
 
-    def _progress(self, eas: list[SteadyStateEA]) -> None:
-        """Publish and log each generation once every trial has finished it."""
-        while self._published < min(len(ea.history) for ea in eas):
+    def _progress(self, eas: list[SteadyStateEA], checkpoint: Checkpoint | None,
+                  started: float) -> None:
+        """Publish, log and checkpoint each generation once every trial has finished it;
+        generations a checkpoint replays were published by the run that recorded them."""
+        done = min(len(ea.history) for ea in eas)
+        if checkpoint is not None and checkpoint.calls <= checkpoint.loaded:
+            self._published = done
+            return
+        if done == self._published:
+            return
+        while self._published < done:
             g = self._published
             best = max(ea.history[g].best for ea in eas)
             mean = float(np.mean([ea.history[g].mean for ea in eas]))
@@ -230,37 +322,57 @@ class EvolutionManager(Node):
                 f'{mean:.4f}, {sum(ea.evaluations for ea in eas)} evaluations, '
                 f"{episodes['started']} episodes, {episodes['restarted']} restarts")
             self._published += 1
+        if checkpoint is not None:
+            checkpoint.save(generation=done - 1,
+                            history=[[asdict(g) for g in ea.history] for ea in eas],
+                            episodes=self._episodes(), wall_time_s=self._wall_time(started))
 
     def _episodes(self) -> dict:
-        """Episodes started and restarted by this run."""
-        return {'started': self.evaluator.episodes - self._counts[0],
-                'restarted': self.evaluator.restarts - self._counts[1]}
+        """Episodes started and restarted by this run (and those of the runs it resumes)."""
+        before = self._before.get('episodes', {})
+        return {'started': self.evaluator.episodes - self._counts[0]
+                + before.get('started', 0),
+                'restarted': self.evaluator.restarts - self._counts[1]
+                + before.get('restarted', 0)}
+
+    def _wall_time(self, started: float) -> float:
+        return time.monotonic() - started + self._before.get('wall_time_s', 0.0)
+
+    @staticmethod
+    def _config(v: dict, config: EAConfig) -> dict:
+        return {'phase': v['phase'], **asdict(config), 'seed': v['seed'],
+                'trials': v['trials'], 'seed_genome': list(v['seed_genome']),
+                'seed_results': v['seed_results']}
 
     def _record(self, v: dict, config: EAConfig, eas: list[SteadyStateEA], robot: dict,
-                wall_time_s: float) -> dict:
+                wall_time_s: float, checkpoint: Checkpoint | None) -> dict:
         trials = [{'seed': ea_seed, 'history': [asdict(g) for g in ea.history],
                    'best_genome': ea.best_genome.tolist(), 'best_fitness': ea.best_fitness,
                    'best_generation': ea.best_generation, 'evaluations': ea.evaluations}
                   for ea_seed, ea in zip(trial_seeds(v['seed'], len(eas)), eas)]
         best = max(range(len(trials)), key=lambda i: trials[i]['best_fitness'])
+        resumed = None if not checkpoint or not checkpoint.loaded else {
+            'checkpoint': str(checkpoint.path), 'batches': checkpoint.loaded,
+            'generation': self._before['generation']}
         return {
             'format': FORMAT,
-            'config': {'phase': v['phase'], **asdict(config), 'seed': v['seed'],
-                       'trials': v['trials'], 'seed_genome': list(v['seed_genome']),
-                       'seed_results': v['seed_results']},
+            'config': self._config(v, config),
             'robot': robot,
+            'workers': self.evaluator.worker_records(),
             'best_trial': best,
             'best_genome': trials[best]['best_genome'],
             'best_fitness': trials[best]['best_fitness'],
             'best_generation': trials[best]['best_generation'],
             'evaluations': sum(t['evaluations'] for t in trials),
             'episodes': self._episodes(),
+            'resumed': resumed,
             'wall_time_s': wall_time_s,
             'trials': trials,
         }
 
 
 def main(args=None) -> int:
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')   # unless asked
     return spin_node(EvolutionManager, args, until=EvolutionManager.start)
 
 

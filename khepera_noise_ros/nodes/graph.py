@@ -1,18 +1,33 @@
 """Evaluating genomes through the node graph: the topic counterpart of CoreEvaluator.
 
-``GraphEvaluator(genomes, seeds)`` loads the genomes into the controller (its
-``genomes`` parameter, through the SetParameters service), starts one batched
-episode on the robot node, and computes each genome's fitness from the light
-and cmd_turn messages it observes, with the core's ``step_fitness``, in the
-same float32 arithmetic as ``core.task.run``.  So for the same genomes, noise
-model and per-robot seeds it returns exactly the core's numbers.
+``GraphEvaluator(genomes, seeds)`` splits the batch across its workers (pairs
+of a robot node and a controller, each in its own namespace), loads each
+part's genomes into its controller (the ``genomes`` parameter, through the
+SetParameters service), starts one batched episode on its robot node, and
+computes each genome's fitness from the light and cmd_turn messages it
+observes, with the core's ``step_fitness``, in the same float32 arithmetic as
+``core.task.run``.  Each robot's randomness comes from its own seed, so for the
+same genomes, noise model and seeds it returns exactly the core's numbers,
+whatever the number of workers and however the batch is split.
+
+The split follows each worker's measured speed: the time a step takes it is
+fitted as a latency plus a cost per robot, and the shares are chosen so that
+all workers finish together (in proportion to their speed when latencies are
+equal; see ``schedule``).  A worker that cannot take more than ``capacity``
+robots (a hardware bridge has one per serial port) gets episodes of at most
+that many, one after another.
+Workers are namespaces, or fnmatch patterns such as ``/worker*`` matched
+against the ROS graph before every batch, so that a worker that appears later
+is used from the next batch.
 
 An episode that stalls (no new message for ``stall_timeout_s``: a node died or
-restarted) or that breaks the protocol (two different messages with the same
-tag, a wrong robot count) is started again under a fresh episode id with the
-same seeds, so the result does not change; after ``max_retries`` it fails with
-``EpisodeFailed``.  Messages tagged with another episode are ignored, so a
-reading is never paired with the wrong step's command.
+stopped answering) or that breaks the protocol (two different messages with
+the same tag, a wrong robot count) is started again under a fresh episode id
+with the same seeds, so the result does not change: on another worker when
+there is one (the failed worker leaves the pool, with a log line, until it
+answers again), else on the same one.  After ``max_retries`` failures of one
+episode the batch fails with ``EpisodeFailed``.  Messages tagged with another
+episode are ignored, so a reading is never paired with the wrong step's command.
 
 It waits in one of two ways: when another thread spins the node's executor
 (the evolution_manager node, a script that spins in the background), on an
@@ -20,184 +35,163 @@ event the callbacks set; when given ``executor``, by spinning it itself.
 """
 from __future__ import annotations
 
-import array
 from contextlib import contextmanager
 from dataclasses import dataclass
-import secrets
 import threading
 import time
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
-from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter_client import AsyncParameterClient
-from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
-from ..core.khepera import SENSORS
 from ..core.network import GENES, check_genomes
-from ..core.task import Trace, step_fitness
-from . import Dropped, protocol
-from .protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+from ..core.task import Trace
+from . import Dropped, protocol, schedule
+from .protocol import BEARING, CMD_TURN, LIGHT
+from .workers import DONE, TOO_LARGE, Chunk, Episode, EpisodeFailed, EpisodeIds, \
+    Worker, discover, episode_fitness, is_pattern
 
-
-class EpisodeFailed(RuntimeError):
-    """An episode could not be completed through the graph."""
-
-
-def episode_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Mean step fitness, summed in float32 step by step exactly as core.task.run does.
-
-    readings: (steps, B, 8) float32; power: (steps, B).
-    """
-    total = np.zeros(readings.shape[1], np.float32)
-    for step_readings, step_power in zip(readings, power):
-        total += step_fitness(step_readings.T, step_power)
-    return (total / len(readings)).astype(np.float64)
-
-
-class EpisodeIds:
-    """Episode ids that count up from a random start, so that two managers sharing a
-    robot node almost surely use different ids."""
-
-    def __init__(self):
-        self._next = secrets.randbelow(protocol.MAX_EPISODE)
-
-    def __next__(self) -> int:
-        self._next = (self._next + 1) % protocol.MAX_EPISODE
-        return self._next
-
-
-class _Episode:
-    """What the evaluator has observed of one episode; filled by the subscription callbacks.
-
-    Each topic's values go straight into a preallocated (steps, B, columns) array, in the
-    dtype the core computes with (readings float32), so that nothing is stacked at the end.
-    """
-
-    LAYOUT = {LIGHT: (SENSORS, np.float32), CMD_TURN: (2, np.int32), BEARING: (1, np.float64)}
-
-    def __init__(self, episode: int, robots: int, steps: int, topics: tuple[str, ...]):
-        self.episode, self.robots, self.steps = episode, robots, steps
-        self.values = {t: np.empty((steps, robots, self.LAYOUT[t][0]), self.LAYOUT[t][1])
-                       for t in topics}
-        self.seen = {t: np.zeros(steps, bool) for t in topics}
-        self.error: str | None = None
-        self.complete = False
-        self.progress = time.monotonic()
-        self._count = 0
-
-    @property
-    def finished(self) -> bool:
-        return self.complete or self.error is not None
-
-    @property
-    def next_step(self) -> int:
-        """The first step some message is still missing for."""
-        return min(int(np.argmin(seen)) if not seen.all() else self.steps
-                   for seen in self.seen.values())
-
-    def add(self, topic: str, step: int, values: np.ndarray) -> None:
-        if self.finished or (topic == BEARING and step == self.steps):   # final heading
-            return
-        if values.shape[0] != self.robots:
-            self.error = (f'{topic} ({self.episode}, {step}) has {values.shape[0]} robots, '
-                          f'the episode has {self.robots}')
-        elif step >= self.steps:
-            self.error = (f'{topic} for step {step}, but the robot node has steps = '
-                          f'{self.steps} (was it changed during the episode?)')
-        elif not self.seen[topic][step]:
-            self.values[topic][step] = values
-            self.seen[topic][step] = True
-            self.progress = time.monotonic()
-            self._count += 1
-            self.complete = self._count == len(self.values) * self.steps
-        elif not np.array_equal(self.values[topic][step],
-                                values.astype(self.values[topic].dtype)):
-            self.error = (f'two different {topic} messages for ({self.episode}, {step}): '
-                          'a node answered twice with different data')
+__all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness', 'local_graph',
+           'spinning', 'events_executor']
 
 
 class GraphEvaluator:
-    """``(genomes (n, 20), seeds (n,)) -> fitness (n,)`` through a robot node and controller.
+    """``(genomes (n, 20), seeds (n,)) -> fitness (n,)`` through one or more worker pairs.
 
-    With ``bearings=False`` it does not subscribe to ``bearing``: one message less to
-    take per step (fitness needs only light and cmd_turn), but no ``trace()``.
+    ``workers``: namespaces or fnmatch patterns of the pairs; empty: the one pair in
+    ``robot_namespace`` (whose ``controller_node`` and ``robot_node`` may be named).
+    ``capacity``: most robots per episode on any worker (0: no limit but the ``ports``
+    a hardware bridge has).  With ``bearings=False`` it does not subscribe to
+    ``bearing``: one message less to take per step (fitness needs only light and
+    cmd_turn), but no ``trace()``.
     """
 
     def __init__(self, node: Node, robot_namespace: str = '', controller_node: str = '',
                  robot_node: str = '', stall_timeout_s: float = 2.0, max_retries: int = 3,
-                 executor: Executor | None = None, bearings: bool = True):
+                 executor: Executor | None = None, bearings: bool = True,
+                 workers: Sequence[str] = (), capacity: int = 0):
+        if workers and (robot_namespace or controller_node or robot_node):
+            raise ValueError('give either workers or robot_namespace (with controller_node '
+                             f'and robot_node), not both: workers={list(workers)}, '
+                             f'robot_namespace={robot_namespace!r}')
+        if capacity < 0:
+            raise ValueError(f'capacity must be >= 0 robots (0: no limit), got {capacity}')
         self.node = node
         self.stall_timeout_s = stall_timeout_s
         self.max_retries = max_retries
         self.executor = executor
-        ns = robot_namespace.rstrip('/')
-        self.topics = {n: self._in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START)}
-        self.controller_node = controller_node or self._in(ns, 'controller')
-        self.robot_node = robot_node
+        self.capacity = capacity
         self.dropped = Dropped(node)
-        self.episodes = 0           # episode attempts started
-        self.restarts = 0
+        self.restarts = 0           # episode attempts that failed and were repeated
         self._ids = EpisodeIds()
         self._wake = threading.Event()
-        self._current: _Episode | None = None
-        self._controller = AsyncParameterClient(node, self.controller_node)
-        self._robot: AsyncParameterClient | None = None
-        self._start_pub = node.create_publisher(Float64MultiArray, self.topics[EPISODE_START],
-                                                protocol.QOS)
-        observed = ((LIGHT, Float64MultiArray, protocol.unpack_light),
-                    (CMD_TURN, Int32MultiArray, protocol.unpack_cmd_turn),
-                    (BEARING, Float64MultiArray, protocol.unpack_bearing))[:3 if bearings else 2]
-        self._observed = tuple(topic for topic, _, _ in observed)
-        for topic, msg_type, unpack in observed:
-            node.create_subscription(msg_type, self.topics[topic],
-                                     self._observer(topic, unpack), protocol.QOS, raw=True)
+        self._observed = (LIGHT, CMD_TURN, BEARING) if bearings else (LIGHT, CMD_TURN)
+        specs = list(workers) or [robot_namespace]
+        self.patterns = [s for s in specs if is_pattern(s)]
+        self.workers: dict[str, Worker] = {}
+        for namespace in specs:
+            if not is_pattern(namespace):
+                self._add(namespace, controller_node, robot_node)
 
-    @staticmethod
-    def _in(ns: str, name: str) -> str:
-        return f'{ns}/{name}' if ns else name
+    def _add(self, namespace: str, controller_node: str = '', robot_node: str = '') -> Worker:
+        worker = Worker(self.node, namespace, self._observed, self.dropped, self._wake,
+                        controller_node, robot_node)
+        self.workers[worker.name] = worker
+        return worker
+
+    # --- what the manager and scripts read ---------------------------------------------
+
+    @property
+    def first(self) -> Worker | None:
+        """The first worker (the only one unless several are configured or found)."""
+        return next(iter(self.workers.values()), None)
+
+    @property
+    def robot_node(self) -> str:
+        return self.first.robot_node if self.first else ''
+
+    @property
+    def controller_node(self) -> str:
+        return self.first.controller_node if self.first else ''
+
+    @property
+    def topics(self) -> dict[str, str]:
+        return self.first.topics if self.first else {}
+
+    @property
+    def episodes(self) -> int:
+        """Episode attempts started, on every worker."""
+        return sum(w.episodes for w in self.workers.values())
+
+    def worker_records(self) -> list[dict]:
+        """Per worker: namespace, nodes, episodes, robots, failures, why it was dropped."""
+        return [w.record() for w in self.workers.values()]
 
     # --- public ------------------------------------------------------------------------
 
     def __call__(self, genomes, seeds) -> np.ndarray:
-        episode = self._run(genomes, seeds)
-        if episode is None:
-            return np.empty(0)
-        return episode_fitness(episode.values[LIGHT], episode.values[CMD_TURN][..., 1])
+        genomes, seeds = _batch(genomes, seeds)
+        fitness = np.empty(len(seeds))
+
+        def keep(chunk: Chunk, episode: Episode) -> None:
+            fitness[chunk.lo:chunk.hi] = episode.fitness()
+        self._run(genomes, seeds, keep)
+        return fitness
 
     def trace(self, genomes, seeds) -> Trace:
-        """Per-step record of the episode ``__call__`` would score."""
+        """Per-step record of the episodes ``__call__`` would score, robots on axis 1."""
         if BEARING not in self._observed:
             raise ValueError('this evaluator was made with bearings=False, so it does not see '
                              'the bearing topic a trace needs')
-        episode = self._run(genomes, seeds)
-        if episode is None:
+        genomes, seeds = _batch(genomes, seeds)
+        if not len(seeds):
             raise ValueError('trace() needs at least one genome')
-        cmd = episode.values[CMD_TURN]
-        return Trace(episode.values[BEARING][..., 0], episode.values[LIGHT],
+        parts: list[tuple[int, Episode]] = []
+        self._run(genomes, seeds, lambda chunk, episode: parts.append((chunk.lo, episode)))
+        values = [episode.values for _, episode in sorted(parts, key=lambda p: p[0])]
+        cmd = np.concatenate([v[CMD_TURN] for v in values], axis=1)
+        return Trace(np.concatenate([v[BEARING][..., 0] for v in values], axis=1),
+                     np.concatenate([v[LIGHT] for v in values], axis=1),
                      np.ascontiguousarray(cmd[..., 0]), np.ascontiguousarray(cmd[..., 1]))
 
-    def robot_parameters(self, timeout_s: float = 5.0) -> dict:
-        """The robot node's parameters by name (for the record of a run)."""
-        names_f = self._robot_client().list_parameters()
+    def robot_parameters(self, timeout_s: float = 5.0, worker: Worker | None = None) -> dict:
+        """A robot node's parameters by name (for the record of a run); the first
+        worker's unless ``worker`` is given."""
+        worker = worker or self.first
+        robot = worker.robot_client() if worker else None
+        if robot is None:
+            raise TimeoutError('no robot node is known yet')
+        names_f = robot.list_parameters()
         if not self._wait(names_f.done, timeout_s):
-            raise TimeoutError(f'no answer from {self.robot_node}/list_parameters')
+            raise TimeoutError(f'no answer from {worker.robot_node}/list_parameters')
         names = list(names_f.result().result.names)
-        values_f = self._robot_client().get_parameters(names)
+        values_f = robot.get_parameters(names)
         if not self._wait(values_f.done, timeout_s):
-            raise TimeoutError(f'no answer from {self.robot_node}/get_parameters')
+            raise TimeoutError(f'no answer from {worker.robot_node}/get_parameters')
         return {n: _python(v) for n, v in zip(names, values_f.result().values)}
 
     def wait_ready(self, timeout_s: float = 30.0) -> None:
-        """Block until a robot node and a controller are connected, else TimeoutError."""
-        if not self._wait(lambda: not self._missing(), timeout_s):
+        """Block until every named worker (and, with patterns, at least one that matches)
+        has its robot node and controller connected; TimeoutError if none has.  A named
+        worker still missing then is used once it appears (with a warning now)."""
+        def ready() -> bool:
+            self._discover()
+            ready = [w for w in self.workers.values() if w.ready()]
+            return len(ready) == len(self.workers) and bool(ready or not self.patterns)
+        if self._wait(ready, timeout_s):
+            return
+        absent = {w.name: w.missing() or [f'the parameter services of its robot node '
+                                          f'{w.robot_node}']
+                  for w in self.workers.values() if not w.ready()}
+        if not self.workers:
+            raise TimeoutError(f'after {timeout_s} s no worker matches {self.patterns}')
+        if len(absent) == len(self.workers):
             raise TimeoutError(f'after {timeout_s} s still waiting for: '
-                               + '; '.join(self._missing()))
-        robot = self._robot_client()
-        if not self._wait(robot.services_are_ready, timeout_s):
-            raise TimeoutError(f'the parameter services of {self.robot_node} did not appear')
+                               + '; '.join(sum(absent.values(), [])))
+        self.node.get_logger().warning(f'starting without worker(s) {absent}: each is used '
+                                       'once it is ready')
 
     # --- waiting -------------------------------------------------------------------------
 
@@ -216,123 +210,162 @@ class GraphEvaluator:
                 self._wake.clear()
         return True
 
-    def _missing(self) -> list[str]:
-        node, t = self.node, self.topics
-        missing = []
-        if self._start_pub.get_subscription_count() < 1:
-            missing.append(f'a robot node subscribed to {t[EPISODE_START]}')
-        if node.count_publishers(t[LIGHT]) < 1 or node.count_subscribers(t[CMD_TURN]) < 2:
-            missing.append(f'a robot node publishing {t[LIGHT]} and subscribed to '
-                           f'{t[CMD_TURN]}')
-        if node.count_publishers(t[CMD_TURN]) < 1 or node.count_subscribers(t[LIGHT]) < 2:
-            missing.append(f'a controller publishing {t[CMD_TURN]} and subscribed to '
-                           f'{t[LIGHT]}')
-        if not self._controller.services_are_ready():
-            missing.append(f'the parameter services of {self.controller_node}')
-        return missing
+    # --- the pool ----------------------------------------------------------------------
 
-    def _robot_names(self) -> list[str]:
-        """Nodes that publish light and subscribe to episode_start, once discovery has
-        named them."""
-        node = self.node
+    def _discover(self) -> None:
+        """Add workers that match a pattern and have appeared in the graph."""
+        if self.patterns:
+            for namespace in discover(self.node, self.patterns):
+                if namespace not in self.workers:
+                    self._add(namespace)
 
-        def names(infos) -> set[str]:
-            return {f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos}
-        light = names(node.get_publishers_info_by_topic(
-            node.resolve_topic_name(self.topics[LIGHT])))
-        start = names(node.get_subscriptions_info_by_topic(
-            node.resolve_topic_name(self.topics[EPISODE_START])))
-        if any('_NODE_NAME_UNKNOWN_' in n for n in light | start):
-            return []
-        return sorted(light & start)
+    def _pool(self) -> list[Worker]:
+        """The workers to use for the next batch: every live one that is ready, after
+        finding new ones and taking back dropped ones that answer again."""
+        self._discover()
+        log = self.node.get_logger()
+        for worker in self.workers.values():
+            if not worker.alive and worker.answers_again(self.stall_timeout_s):
+                worker.rejoin()
+                log.warning(f'worker {worker.name} answers again: back in the pool')
+        for worker in self.workers.values():
+            # a worker that has joined is checked cheaply: its robot node still listens
+            joined = worker.joined and worker.listening() or worker.ready()
+            if joined and not worker.joined and len(self.workers) > 1:
+                log.info(f'worker {worker.name} ({worker.robot_node}) joined')
+            worker.joined = joined
+        live = [w for w in self.workers.values() if w.alive and w.joined]
+        if live:
+            return live
+        alive = [w for w in self.workers.values() if w.alive]   # none ready: try them anyway
+        if not alive:
+            raise EpisodeFailed(f'no worker matches {self.patterns}: no node publishes '
+                                f'<namespace>/{LIGHT} in a matching namespace')
+        return alive
 
-    def _robot_client(self) -> AsyncParameterClient:
-        """The robot node's parameter client; its name is found from who publishes light."""
-        if self._robot is None:
-            if not self.robot_node:
-                if not self._wait(self._robot_names, self.stall_timeout_s):
-                    raise EpisodeFailed(f'no robot node publishes {self.topics[LIGHT]} and '
-                                        f'subscribes to {self.topics[EPISODE_START]}')
-                names = self._robot_names()
-                if len(names) != 1:
-                    raise EpisodeFailed(f'expected one robot node (publishing '
-                                        f'{self.topics[LIGHT]}, subscribed to '
-                                        f'{self.topics[EPISODE_START]}), found {names}; name '
-                                        'it with robot_node')
-                self.robot_node = names[0]
-            self._robot = AsyncParameterClient(self.node, self.robot_node)
-        return self._robot
+    def _share(self, chunk: Chunk, workers: list[Worker]) -> None:
+        """Queue ``chunk`` on ``workers`` by their measured cost, cut to their capacity.  A
+        worker not measured yet counts as the best of the others, so it gets a share
+        and is measured."""
+        known = [w.cost.model for w in workers if w.cost.model]
+        default = tuple(np.min(known, axis=0)) if known else (0.0, 1.0)
+        queues = schedule.plan(chunk.lo, chunk.hi, [(w.cost.model or default,
+                                                     self._capacity(w)) for w in workers])
+        for worker, queue in zip(workers, queues):
+            worker.queue.extend(Chunk(lo, hi, chunk.attempts) for lo, hi in queue)
 
-    # --- one batched episode -----------------------------------------------------------
+    def _capacity(self, worker: Worker) -> int | None:
+        limits = [c for c in (self.capacity, worker.capacity) if c]
+        return min(limits) if limits else None
 
-    def _run(self, genomes, seeds) -> _Episode | None:
-        genomes = check_genomes(genomes) if np.size(genomes) else np.empty((0, GENES))
-        seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
-        if seeds.shape != (len(genomes),):
-            raise ValueError(f'need one seed per genome: {len(genomes)} genomes, '
-                             f'{seeds.size} seeds')
-        if ((seeds < 0) | (seeds >= protocol.MAX_SEED)).any():
-            raise ValueError(f'episode seeds must be integers in [0, 2**53), got '
-                             f'{seeds[(seeds < 0) | (seeds >= protocol.MAX_SEED)][0]}')
-        if not len(genomes):
-            return None
-        genes = array.array('d', genomes.tobytes())
-        reason = ''
-        for attempt in range(1, self.max_retries + 2):
-            episode, reason = self._attempt(genes, seeds)
-            if episode is not None:
-                return episode
-            self.restarts += attempt <= self.max_retries
-            self.node.get_logger().warning(
-                f'episode of {len(seeds)} robots, attempt {attempt}/{self.max_retries + 1}: '
-                f'{reason}' + ('; starting it again under a new episode id'
-                               if attempt <= self.max_retries else ''))
-        raise EpisodeFailed(f'an episode of {len(seeds)} robots failed '
-                            f'{self.max_retries + 1} times; last: {reason}. Are the robot '
-                            f'node ({self.topics[LIGHT]}) and {self.controller_node} running?')
+    # --- one batch ---------------------------------------------------------------------
 
-    def _attempt(self, genes: array.array, seeds: np.ndarray) -> tuple[_Episode | None, str]:
-        loaded = self._controller.set_parameters([ParameterMsg(
-            name='genomes', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                                 double_array_value=genes))])
-        steps = self._robot_client().get_parameters(['steps'])
-        for future in (loaded, steps):
-            future.add_done_callback(lambda _: self._wake.set())
-        if not self._wait(lambda: loaded.done() and steps.done(), self.stall_timeout_s):
-            return None, (f'no answer from the parameter services of {self.controller_node} '
-                          f'and {self.robot_node} within {self.stall_timeout_s} s')
-        result = loaded.result().results[0]
-        if not result.successful:
-            raise EpisodeFailed(f'{self.controller_node} refused the genomes: {result.reason}')
-        values = steps.result().values
-        if not values or values[0].type != ParameterType.PARAMETER_INTEGER:
-            raise EpisodeFailed(f'{self.robot_node} has no integer parameter steps: is it a '
-                                'robot node?')
-        episode = _Episode(next(self._ids), len(seeds), values[0].integer_value, self._observed)
-        self._current = episode
-        self.episodes += 1
-        self._start_pub.publish(protocol.pack_episode_start(episode.episode, seeds, raw=True))
-        self._wait(lambda: episode.finished, lambda: episode.progress + self.stall_timeout_s)
-        self._current = None
-        if episode.complete:
-            return episode, ''
-        return None, (f'episode {episode.episode}: ' + (episode.error or (
-            f'stalled at step {episode.next_step} of {episode.steps}: no new message for '
-            f'{self.stall_timeout_s} s')))
+    def _run(self, genomes: np.ndarray, seeds: np.ndarray,
+             keep: Callable[[Chunk, Episode], None]) -> None:
+        """Run the batch's episodes, handing each finished one to ``keep``."""
+        if not len(seeds):
+            return
+        live = self._pool()
+        try:
+            self._share(Chunk(0, len(seeds)), live)
+            self._drive(live, genomes, seeds, keep)
+        finally:
+            for worker in self.workers.values():
+                worker.queue.clear()
+                worker.release()
 
-    def _observer(self, topic: str, unpack) -> Callable:
-        def observe(msg) -> None:
-            try:
-                batch = unpack(msg)
-            except protocol.Malformed as exc:
-                self.dropped.add('malformed', str(exc))
-                return
-            episode = self._current
-            if episode is not None and batch.episode == episode.episode:
-                episode.add(topic, batch.step, batch.values)
-                if episode.finished:
-                    self._wake.set()
-        return observe
+    def _drive(self, live: list[Worker], genomes: np.ndarray, seeds: np.ndarray,
+               keep: Callable[[Chunk, Episode], None]) -> None:
+        left, steps = len(seeds), {}
+        while left:
+            for worker in live:
+                if not worker.busy and (worker.queue or self._steal(worker, live)):
+                    worker.begin(worker.queue.popleft(), genomes)
+            busy = [w for w in live if w.busy]
+            news = False
+            for worker in busy:
+                outcome = worker.poll(seeds, self._ids, self.stall_timeout_s)
+                if outcome is None:
+                    continue
+                news = True
+                status, reason = outcome
+                if status == DONE:
+                    self._check_steps(steps, worker)
+                    keep(worker.chunk, worker.episode)
+                    left -= worker.chunk.robots
+                    worker.release()
+                elif status == TOO_LARGE:
+                    chunk = worker.chunk
+                    worker.release()
+                    worker.queue.extendleft(reversed([Chunk(lo, hi, chunk.attempts) for lo, hi
+                                                      in schedule.pieces(chunk.lo, chunk.hi,
+                                                                         worker.capacity)]))
+                else:
+                    live = self._failed(worker, reason, live)
+            if not news:
+                self._wait(lambda: any(w.news() for w in busy),
+                           lambda: min(w.deadline(self.stall_timeout_s) for w in busy))
+
+    def _steal(self, thief: Worker, live: list[Worker]) -> bool:
+        """Move the last queued chunk of the worker with most robots queued to ``thief``
+        (cut to its capacity); False when nothing is queued anywhere."""
+        victim = max(live, key=lambda w: sum(c.robots for c in w.queue))
+        if not victim.queue:
+            return False
+        chunk = victim.queue.pop()
+        parts = schedule.pieces(chunk.lo, chunk.hi, self._capacity(thief))
+        victim.queue.extend(Chunk(lo, hi, chunk.attempts) for lo, hi in parts[:-1])
+        thief.queue.append(Chunk(*parts[-1], chunk.attempts))
+        return True
+
+    def _check_steps(self, steps: dict[str, int], worker: Worker) -> None:
+        """Every episode of a batch must have as many steps, else fitness would differ."""
+        steps[worker.name] = worker.episode.steps
+        if len(set(steps.values())) > 1:
+            raise EpisodeFailed(f'the workers run episodes of different lengths {steps}: '
+                                'give every robot node the same steps (and parameters)')
+
+    def _failed(self, worker: Worker, reason: str, live: list[Worker]) -> list[Worker]:
+        """Repeat a failed episode with the same seeds: on the other workers when there are
+        any (this one leaves the pool), else on this one.  Returns the live workers."""
+        chunk = worker.chunk
+        chunk.attempts += 1
+        if chunk.attempts > self.max_retries:
+            raise EpisodeFailed(f'an episode of {chunk.robots} robots failed '
+                                f'{chunk.attempts} times; last: {reason}. Are the robot '
+                                f'node ({worker.topics[LIGHT]}) and {worker.controller_node} '
+                                'running?')
+        self.restarts += 1
+        log = self.node.get_logger()
+        others = [w for w in live if w is not worker]
+        if not others:
+            worker.failures += 1
+            worker.release()
+            worker.queue.appendleft(chunk)
+            log.warning(f'episode of {chunk.robots} robots, attempt {chunk.attempts}/'
+                        f'{self.max_retries + 1}: {reason}; starting it again under a new '
+                        'episode id')
+            return live
+        held = worker.drop(reason)
+        log.error(f'worker {worker.name} dropped from the pool: {reason}; its '
+                  f'{sum(c.robots for c in held)} robots of this batch go to '
+                  f'{", ".join(w.name for w in others)} (same seeds, new episode ids)')
+        for part in held:
+            self._share(part, others)
+        return others
+
+
+def _batch(genomes, seeds) -> tuple[np.ndarray, np.ndarray]:
+    """Checked (n, 20) genomes and (n,) int64 seeds, or a ValueError naming the problem."""
+    genomes = check_genomes(genomes) if np.size(genomes) else np.empty((0, GENES))
+    seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
+    if seeds.shape != (len(genomes),):
+        raise ValueError(f'need one seed per genome: {len(genomes)} genomes, '
+                         f'{seeds.size} seeds')
+    bad = (seeds < 0) | (seeds >= protocol.MAX_SEED)
+    if bad.any():
+        raise ValueError(f'episode seeds must be integers in [0, 2**53), got {seeds[bad][0]}')
+    return genomes, seeds
 
 
 def _python(value: ParameterValue):
@@ -378,7 +411,9 @@ def events_executor(context=None) -> Executor:
     """rclpy's EventsExecutor, with a fraction of the Python executor's overhead per
     callback, where it can run (it needs a stderr with a file descriptor for its crash
     handler), else a SingleThreadedExecutor.  Spin it from the thread that creates
-    entities: here, let the evaluator spin it (``thread=False``)."""
+    entities: here, let the evaluator spin it (``thread=False``).  Drive it with
+    ``spin_once``: in this rclpy build its ``spin()`` takes no message or service request
+    from another process."""
     try:
         from rclpy.experimental.events_executor import EventsExecutor
         return EventsExecutor(context=context)

@@ -1,0 +1,394 @@
+"""One worker pair as the evaluator sees it: a robot node and a controller in a namespace.
+
+A ``Worker`` runs at most one episode at a time, without blocking: ``begin``
+loads a chunk's genomes into the controller (SetParameters) and reads the
+robot node's ``steps`` (and ``ports``, the robots a hardware bridge has);
+``poll`` then publishes ``episode_start`` and reports the episode done,
+failed (stalled, or broke the protocol) or too large for the robot node.
+Its subscriptions fill the episode's arrays as light and cmd_turn arrive;
+messages tagged with another episode id are ignored, so a late answer from
+an earlier attempt can never be paired with the current one.
+
+``discover`` finds worker namespaces in the ROS graph: wherever some node
+publishes ``<ns>/light`` and some node subscribes to ``<ns>/episode_start``.
+"""
+from __future__ import annotations
+
+import array
+from collections import deque
+from dataclasses import dataclass
+from fnmatch import fnmatchcase
+import secrets
+import threading
+import time
+from typing import Callable, Iterable
+
+import numpy as np
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rclpy.node import Node
+from rclpy.parameter_client import AsyncParameterClient
+from std_msgs.msg import Float64MultiArray, Int32MultiArray
+
+from ..core.khepera import SENSORS
+from ..core.task import step_fitness
+from . import Dropped, protocol
+from .schedule import Cost
+from .protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+
+LIGHT_TYPE = 'std_msgs/msg/Float64MultiArray'
+
+
+class EpisodeFailed(RuntimeError):
+    """An episode could not be completed through the graph."""
+
+
+def episode_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """Mean step fitness, summed in float32 step by step exactly as core.task.run does.
+
+    readings: (steps, B, 8) float32; power: (steps, B).
+    """
+    total = np.zeros(readings.shape[1], np.float32)
+    for step_readings, step_power in zip(readings, power):
+        total += step_fitness(step_readings.T, step_power)
+    return (total / len(readings)).astype(np.float64)
+
+
+class EpisodeIds:
+    """Episode ids that count up from a random start, so that two managers sharing a
+    robot node almost surely use different ids."""
+
+    def __init__(self):
+        self._next = secrets.randbelow(protocol.MAX_EPISODE)
+
+    def __next__(self) -> int:
+        self._next = (self._next + 1) % protocol.MAX_EPISODE
+        return self._next
+
+
+class Episode:
+    """What the evaluator has observed of one episode; filled by the subscription callbacks.
+
+    Each topic's values go straight into a preallocated (steps, B, columns) array, in the
+    dtype the core computes with (readings float32), so that nothing is stacked at the end.
+    """
+
+    LAYOUT = {LIGHT: (SENSORS, np.float32), CMD_TURN: (2, np.int32), BEARING: (1, np.float64)}
+
+    def __init__(self, episode: int, robots: int, steps: int, topics: tuple[str, ...]):
+        self.episode, self.robots, self.steps = episode, robots, steps
+        self.values = {t: np.empty((steps, robots, self.LAYOUT[t][0]), self.LAYOUT[t][1])
+                       for t in topics}
+        self.seen = {t: np.zeros(steps, bool) for t in topics}
+        self.error: str | None = None
+        self.complete = False
+        self.progress = time.monotonic()
+        self._count = 0
+
+    @property
+    def finished(self) -> bool:
+        return self.complete or self.error is not None
+
+    @property
+    def next_step(self) -> int:
+        """The first step some message is still missing for."""
+        return min(int(np.argmin(seen)) if not seen.all() else self.steps
+                   for seen in self.seen.values())
+
+    def fitness(self) -> np.ndarray:
+        return episode_fitness(self.values[LIGHT], self.values[CMD_TURN][..., 1])
+
+    def add(self, topic: str, step: int, values: np.ndarray) -> None:
+        if self.finished or (topic == BEARING and step == self.steps):   # final heading
+            return
+        if values.shape[0] != self.robots:
+            self.error = (f'{topic} ({self.episode}, {step}) has {values.shape[0]} robots, '
+                          f'the episode has {self.robots}')
+        elif step >= self.steps:
+            self.error = (f'{topic} for step {step}, but the robot node has steps = '
+                          f'{self.steps} (was it changed during the episode?)')
+        elif not self.seen[topic][step]:
+            self.values[topic][step] = values
+            self.seen[topic][step] = True
+            self.progress = time.monotonic()
+            self._count += 1
+            self.complete = self._count == len(self.values) * self.steps
+        elif not np.array_equal(self.values[topic][step],
+                                values.astype(self.values[topic].dtype)):
+            self.error = (f'two different {topic} messages for ({self.episode}, {step}): '
+                          'a node answered twice with different data')
+
+
+@dataclass
+class Chunk:
+    """Robots [lo, hi) of a batch, and how many times an episode of them failed."""
+
+    lo: int
+    hi: int
+    attempts: int = 0
+
+    @property
+    def robots(self) -> int:
+        return self.hi - self.lo
+
+
+# poll() outcomes
+DONE, FAILED, TOO_LARGE = 'done', 'failed', 'too large'
+
+
+def _in(ns: str, name: str) -> str:
+    return f'{ns}/{name}' if ns else name
+
+
+def is_pattern(namespace: str) -> bool:
+    return any(c in namespace for c in '*?[')
+
+
+def discover(node: Node, patterns: Iterable[str]) -> list[str]:
+    """Namespaces matching ``patterns`` (fnmatch) where a node publishes light and a node
+    subscribes to episode_start."""
+    found = []
+    for name, types in node.get_topic_names_and_types():
+        if not name.endswith('/' + LIGHT) or LIGHT_TYPE not in types:
+            continue
+        ns = name[:-len(LIGHT) - 1]
+        if any(fnmatchcase(ns or '/', p) for p in patterns) and node.count_publishers(name) \
+                and node.count_subscribers(f'{ns}/{EPISODE_START}'):
+            found.append(ns or '/')
+    return sorted(found)
+
+
+class Worker:
+    """The evaluator's end of one worker pair; ``name`` is its namespace."""
+
+    def __init__(self, node: Node, namespace: str, observed: tuple[str, ...],
+                 dropped: Dropped, wake: threading.Event, controller_node: str = '',
+                 robot_node: str = ''):
+        self.node, self.dropped, self._wake = node, dropped, wake
+        ns = namespace.rstrip('/')
+        self.topics = {n: _in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START)}
+        self.name = node.resolve_topic_name(self.topics[LIGHT])[:-len(LIGHT) - 1] or '/'
+        self.controller_node = controller_node or _in(ns, 'controller')
+        self.robot_node = robot_node
+        self._controller = AsyncParameterClient(node, self.controller_node)
+        self._robot: AsyncParameterClient | None = None
+        self._start_pub = node.create_publisher(Float64MultiArray, self.topics[EPISODE_START],
+                                                protocol.QOS)
+        unpack = {LIGHT: (Float64MultiArray, protocol.unpack_light),
+                  CMD_TURN: (Int32MultiArray, protocol.unpack_cmd_turn),
+                  BEARING: (Float64MultiArray, protocol.unpack_bearing)}
+        self.observed = observed
+        for topic in observed:
+            msg_type, unpacker = unpack[topic]
+            node.create_subscription(msg_type, self.topics[topic],
+                                     self._observer(topic, unpacker), protocol.QOS, raw=True)
+        self.alive, self.joined, self.reason = True, False, ''
+        self.queue: deque[Chunk] = deque()
+        self.chunk: Chunk | None = None
+        self.episode: Episode | None = None
+        self.cost = Cost()                      # seconds per step, by robots
+        self.capacity: int | None = None        # robots per episode (ports); None: any
+        self.episodes = self.robots = self.failures = 0
+        self._requests: tuple | None = None
+        self._genes = array.array('d')
+        self._began = 0.0
+        self._probe: tuple[float, list] | None = None
+
+    # --- the graph ------------------------------------------------------------------------
+
+    def missing(self) -> list[str]:
+        """What this pair still lacks in the ROS graph (empty: connected)."""
+        node, t = self.node, self.topics
+        missing = []
+        if self._start_pub.get_subscription_count() < 1:
+            missing.append(f'a robot node subscribed to {t[EPISODE_START]}')
+        if node.count_publishers(t[LIGHT]) < 1 or node.count_subscribers(t[CMD_TURN]) < 2:
+            missing.append(f'a robot node publishing {t[LIGHT]} and subscribed to '
+                           f'{t[CMD_TURN]}')
+        if node.count_publishers(t[CMD_TURN]) < 1 or node.count_subscribers(t[LIGHT]) < 2:
+            missing.append(f'a controller publishing {t[CMD_TURN]} and subscribed to '
+                           f'{t[LIGHT]}')
+        if not self._controller.services_are_ready():
+            missing.append(f'the parameter services of {self.controller_node}')
+        return missing
+
+    def ready(self) -> bool:
+        """Connected, and the robot node's parameter services are up."""
+        robot = self.robot_client()
+        return not self.missing() and robot is not None and robot.services_are_ready()
+
+    def listening(self) -> bool:
+        """Does some robot node still subscribe to episode_start (one cheap check)?"""
+        return self._start_pub.get_subscription_count() > 0
+
+    def robot_names(self) -> list[str]:
+        """Nodes that publish light and subscribe to episode_start, once discovery has
+        named them."""
+        node = self.node
+
+        def names(infos) -> set[str]:
+            return {f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos}
+        light = names(node.get_publishers_info_by_topic(
+            node.resolve_topic_name(self.topics[LIGHT])))
+        start = names(node.get_subscriptions_info_by_topic(
+            node.resolve_topic_name(self.topics[EPISODE_START])))
+        if any('_NODE_NAME_UNKNOWN_' in n for n in light | start):
+            return []
+        return sorted(light & start)
+
+    def robot_client(self) -> AsyncParameterClient | None:
+        """The robot node's parameter client, its name found from who publishes light;
+        None while no such node is known.  EpisodeFailed if there are several."""
+        if self._robot is None:
+            if not self.robot_node:
+                names = self.robot_names()
+                if len(names) > 1:
+                    raise EpisodeFailed(f'expected one robot node (publishing '
+                                        f'{self.topics[LIGHT]}, subscribed to '
+                                        f'{self.topics[EPISODE_START]}), found {names}; name '
+                                        'it with robot_node')
+                if not names:
+                    return None
+                self.robot_node = names[0]
+            self._robot = AsyncParameterClient(self.node, self.robot_node)
+        return self._robot
+
+    # --- one episode ----------------------------------------------------------------------
+
+    @property
+    def busy(self) -> bool:
+        return self.chunk is not None
+
+    def begin(self, chunk: Chunk, genomes: np.ndarray) -> None:
+        """Start loading ``chunk`` (its genomes: the batch's rows lo..hi)."""
+        self.chunk, self.episode, self._requests = chunk, None, None
+        self._genes = array.array('d', np.ascontiguousarray(genomes[chunk.lo:chunk.hi])
+                                  .tobytes())
+        self._began = time.monotonic()
+        self._send()
+
+    def _send(self) -> None:
+        robot = self.robot_client()
+        if robot is None:
+            return
+        loaded = self._controller.set_parameters([ParameterMsg(
+            name='genomes', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                                                 double_array_value=self._genes))])
+        self._requests = (loaded, robot.get_parameters(['steps']),
+                          robot.get_parameters(['ports']))
+        for future in self._requests:
+            future.add_done_callback(lambda _: self._wake.set())
+
+    def poll(self, seeds: np.ndarray, ids: EpisodeIds, stall_timeout_s: float
+             ) -> tuple[str, str] | None:
+        """Advance the current chunk: None while it runs, else (DONE, ''),
+        (FAILED, reason) or (TOO_LARGE, '') once ``capacity`` is known to be smaller."""
+        now = time.monotonic()
+        if self.episode is not None:
+            return self._running(now, stall_timeout_s)
+        if self._requests is None:
+            self._send()
+        if self._requests is None or not all(f.done() for f in self._requests):
+            if now - self._began < stall_timeout_s:
+                return None
+            return FAILED, (f'no answer from the parameter services of {self.controller_node} '
+                            f'and {self.robot_node or "a robot node"} within '
+                            f'{stall_timeout_s} s')
+        steps = self._loaded()
+        if self.capacity is not None and self.chunk.robots > self.capacity:
+            return TOO_LARGE, ''
+        self.episode = Episode(next(ids), self.chunk.robots, steps, self.observed)
+        self.episodes += 1
+        self._start_pub.publish(protocol.pack_episode_start(
+            self.episode.episode, seeds[self.chunk.lo:self.chunk.hi], raw=True))
+        return None
+
+    def _loaded(self) -> int:
+        """The robot node's steps, once the genomes are in; learns its capacity."""
+        loaded, steps, ports = (f.result() for f in self._requests)
+        if not loaded.results[0].successful:
+            raise EpisodeFailed(f'{self.controller_node} refused the genomes: '
+                                f'{loaded.results[0].reason}')
+        if not steps.values or steps.values[0].type != ParameterType.PARAMETER_INTEGER:
+            raise EpisodeFailed(f'{self.robot_node} has no integer parameter steps: is it a '
+                                'robot node?')
+        if ports.values and ports.values[0].type == ParameterType.PARAMETER_STRING_ARRAY:
+            self.capacity = max(1, len(ports.values[0].string_array_value))
+        return steps.values[0].integer_value
+
+    def _running(self, now: float, stall_timeout_s: float) -> tuple[str, str] | None:
+        episode = self.episode
+        if episode.complete:
+            self.cost.add(episode.robots, (now - self._began) / episode.steps)
+            self.robots += episode.robots
+            return DONE, ''
+        if episode.error is not None:
+            return FAILED, f'episode {episode.episode}: {episode.error}'
+        if now - episode.progress < stall_timeout_s:
+            return None
+        return FAILED, (f'episode {episode.episode} stalled at step {episode.next_step} of '
+                        f'{episode.steps}: no new message for {stall_timeout_s} s')
+
+    def release(self) -> None:
+        """Forget the current chunk (after it is done or failed)."""
+        self.chunk, self.episode, self._requests = None, None, None
+
+    def news(self) -> bool:
+        """Has something happened that poll() would act on?"""
+        if self.episode is not None:
+            return self.episode.finished
+        return self._requests is None or all(f.done() for f in self._requests)
+
+    def deadline(self, stall_timeout_s: float) -> float:
+        start = self._began if self.episode is None else self.episode.progress
+        return start + stall_timeout_s
+
+    # --- leaving and coming back ----------------------------------------------------------
+
+    def drop(self, reason: str) -> list[Chunk]:
+        """Leave the pool; returns the chunks it held (the current one first)."""
+        held = ([self.chunk] if self.chunk is not None else []) + list(self.queue)
+        self.queue.clear()
+        self.release()
+        self.alive, self.reason, self.failures = False, reason, self.failures + 1
+        self._probe = None
+        return held
+
+    def answers_again(self, timeout_s: float) -> bool:
+        """For a dropped worker: do both its nodes answer a parameter request again (it was
+        stopped and resumed, or restarted)?  Sends a request when none is pending."""
+        if self._probe is not None and all(f.done() for f in self._probe[1]):
+            return True
+        if self.missing() or (self._probe is not None
+                              and time.monotonic() - self._probe[0] < timeout_s):
+            return False
+        robot = self.robot_client()
+        if robot is not None:
+            self._probe = (time.monotonic(), [robot.get_parameters(['steps']),
+                                              self._controller.get_parameter_types(['genomes'])])
+        return False
+
+    def rejoin(self) -> None:
+        self.alive, self.reason, self._probe = True, '', None
+
+    def record(self) -> dict:
+        """For the results: who it is, what it did, its measured cost, why it left."""
+        latency, per_robot = self.cost.model or (None, None)
+        return {'namespace': self.name, 'robot_node': self.robot_node,
+                'controller_node': self.controller_node, 'episodes': self.episodes,
+                'robots': self.robots, 'failures': self.failures,
+                'latency_s': latency, 'robot_steps_per_s': per_robot and 1 / per_robot,
+                'dropped': None if self.alive else self.reason}
+
+    def _observer(self, topic: str, unpack) -> Callable:
+        def observe(msg) -> None:
+            try:
+                batch = unpack(msg)
+            except protocol.Malformed as exc:
+                self.dropped.add('malformed', str(exc))
+                return
+            episode = self.episode
+            if episode is not None and batch.episode == episode.episode:
+                episode.add(topic, batch.step, batch.values)
+                if episode.finished:
+                    self._wake.set()
+        return observe
