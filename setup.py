@@ -3,7 +3,7 @@ from glob import glob
 from setuptools import find_packages, setup
 
 package_name = 'khepera_noise_ros'
-nodes = ['simulator', 'controller', 'evolution_manager', 'hardware_bridge']
+nodes = ['simulator', 'controller', 'evolution_manager', 'hardware_bridge', 'worker_pair']
 
 setup(
     name=package_name,

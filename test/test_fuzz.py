@@ -590,8 +590,6 @@ def test_fuzzing_the_hardware_bridge_during_evaluations_changes_nothing():
         np.testing.assert_array_equal(got, want)
 
 
-@pytest.mark.xfail(strict=True, reason='evolution_manager accepts these and fails later; '
-                   'the fix belongs in evolution_manager.py')
 @pytest.mark.parametrize('name, value', [
     ('seed_results', '/nonexistent/phase1.json'),
     ('results_path', '/nonexistent/dir/results.json'),

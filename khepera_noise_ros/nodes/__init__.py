@@ -33,6 +33,7 @@ def spin_node(make_node: Callable[[], Node], args=None,
     stopped = 0 if until is None else 130
     for fd in (1, 2):                       # stdout, stderr (rcutils logs to stderr)
         never_block(fd)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')   # unless asked
     rclpy.init(args=args)
     node = None
     try:

@@ -119,6 +119,16 @@ def trial_seeds(seed: int, trials: int) -> list[int]:
     return [(seed + i) % (SEED_MAX + 1) for i in range(trials)]
 
 
+def _check_writable(path: str) -> None:
+    """Refuse a results path that could only fail at the end of the run, results lost."""
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path('.')
+    if not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise ValueError(f'results_path {path!r}: {folder} is not a writable directory')
+    if len(target.name) > os.pathconf(folder, 'PC_NAME_MAX') - 16:   # room for a temp name
+        raise ValueError(f'results_path {path!r}: the file name is too long for {folder}')
+
+
 def seed_genomes(values: dict[str, Any]) -> list[np.ndarray | None]:
     """The seed genome of each trial (None: random start)."""
     trials = values['trials']
@@ -176,6 +186,14 @@ class EvolutionManager(Node):
         ea_config(values)
         if len(values['seed_genome']):
             _one_genome(values['seed_genome'])
+        if values['seed_results']:
+            try:        # read it now: a file that is not there fails here, not at start()
+                seed_genomes(values)
+            except (OSError, json.JSONDecodeError) as exc:
+                raise ValueError(f"seed_results {values['seed_results']!r} cannot be read: "
+                                 f'{exc}') from None
+        if values['results_path']:
+            _check_writable(values['results_path'])
         workers = list(values['workers'])
         for namespace in workers:
             if not namespace.strip() or namespace != namespace.strip() or (
@@ -372,7 +390,6 @@ class EvolutionManager(Node):
 
 
 def main(args=None) -> int:
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')   # unless asked
     return spin_node(EvolutionManager, args, until=EvolutionManager.start)
 
 
