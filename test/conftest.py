@@ -1,4 +1,5 @@
 """Suite-wide set-up: DDS stays on loopback, and each test run gets its own domain."""
+from contextlib import contextmanager
 import itertools
 import os
 
@@ -16,8 +17,8 @@ def next_domain_id() -> int:
     return (int(os.environ['ROS_DOMAIN_ID']) + next(_domains)) % 200 + 1
 
 
-@pytest.fixture
-def ros_context():
+@contextmanager
+def ros_domain():
     """A fresh rclpy Context on its own domain, always shut down."""
     import rclpy
     from rclpy.context import Context
@@ -27,3 +28,9 @@ def ros_context():
         yield context
     finally:
         context.try_shutdown()
+
+
+@pytest.fixture
+def ros_context():
+    with ros_domain() as context:
+        yield context

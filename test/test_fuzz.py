@@ -35,7 +35,8 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 
-from conftest import next_domain_id
+from conftest import next_domain_id, ros_domain
+import nodes_fixtures
 from khepera_noise_ros.core import network
 from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.noise import NoiseModel
@@ -61,20 +62,16 @@ CORE = CoreEvaluator(noise=NoiseModel('combination', 0.04, 0.03,
                      task=Task(steps=STEPS))
 TIMEOUT = 20.0
 
+
+def wait_for(condition: Callable[[], bool], timeout: float = TIMEOUT) -> bool:
+    return nodes_fixtures.wait_for(condition, timeout)
+
+
 # topic: message type, header length, unpack
 TOPICS = {LIGHT: (Float64MultiArray, 2, protocol.unpack_light),
           CMD_TURN: (Int32MultiArray, 2, protocol.unpack_cmd_turn),
           BEARING: (Float64MultiArray, 2, protocol.unpack_bearing),
           EPISODE_START: (Float64MultiArray, 1, protocol.unpack_episode_start)}
-
-
-def wait_for(condition: Callable[[], bool], timeout: float = TIMEOUT) -> bool:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.002)
-    return True
 
 
 # --- messages that break the contract ------------------------------------------------------
@@ -345,16 +342,6 @@ def running(nodes: list[Node], context) -> Iterator[list[BaseException]]:
         thread.join(10)
         for node in nodes:
             node.destroy_node()
-
-
-@contextmanager
-def ros_domain() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context, domain_id=next_domain_id())
-    try:
-        yield context
-    finally:
-        context.try_shutdown()
 
 
 def parameters(node: Node) -> dict:
