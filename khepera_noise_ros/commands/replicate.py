@@ -168,8 +168,9 @@ class Progress:
 
 
 # First guesses of the cost of one episode in a batch, replaced by measurement as soon as
-# a world has run (a real robot: 60 turns of a few tenths of a second).
-SECONDS_PER_EPISODE = {'graph': 0.003, 'core': 0.0005, 'emulator': 0.15, 'world': 0.004,
+# a world has run (measured here with --quick; a real robot: 60 turns of a few tenths of
+# a second).
+SECONDS_PER_EPISODE = {'graph': 0.001, 'core': 0.0005, 'emulator': 0.012, 'world': 0.004,
                        'hardware': 20.0}
 
 
