@@ -34,8 +34,16 @@ def _rows(sensors, channels: int) -> list[int]:
     return list(sensors)
 
 
+class _OnSensors:
+    """An effect located on a set of sensors."""
+
+    @property
+    def location(self) -> list:
+        return list(self.sensors)
+
+
 @dataclass(frozen=True)
-class SensorGainOffset:
+class SensorGainOffset(_OnSensors):
     """Per-sensor calibration: reading = anchor - gain * (anchor - ideal) + offset."""
 
     name: ClassVar[str] = 'sensor_gain_offset'
@@ -52,13 +60,9 @@ class SensorGainOffset:
         g[rows, 0], o[rows, 0] = self.gains, self.offsets
         return lambda level: self.anchor - g * (self.anchor - level) + o
 
-    @property
-    def location(self) -> list:
-        return list(self.sensors)
-
 
 @dataclass(frozen=True)
-class TemporalDrift:
+class TemporalDrift(_OnSensors):
     """Slow AR(1) wander of the sensors' gain: sd ``sd`` (a fraction), correlation time
     ``time_constant`` samples, one wander for all ``sensors`` if ``shared``."""
 
@@ -83,13 +87,9 @@ class TemporalDrift:
             return out
         return apply
 
-    @property
-    def location(self) -> list:
-        return list(self.sensors)
-
 
 @dataclass(frozen=True)
-class IntensityDependentNoise:
+class IntensityDependentNoise(_OnSensors):
     """A flicker all ``sensors`` see at once, larger the darker the reading:
     reading += z * strength * r * (r / scale) ** exponent, z ~ N(0, 1) shared."""
 
@@ -110,10 +110,6 @@ class IntensityDependentNoise:
                 * (r / self.scale) ** self.exponent
             return out
         return apply
-
-    @property
-    def location(self) -> list:
-        return list(self.sensors)
 
 
 @dataclass(frozen=True)
@@ -146,7 +142,7 @@ class CorrelatedNoise:
 
 
 @dataclass(frozen=True)
-class SensorLatency:
+class SensorLatency(_OnSensors):
     """The ``sensors`` report the reading of ``steps`` samples ago (the first repeats)."""
 
     name: ClassVar[str] = 'sensor_latency'
@@ -166,13 +162,9 @@ class SensorLatency:
             return out
         return apply
 
-    @property
-    def location(self) -> list:
-        return list(self.sensors)
-
 
 @dataclass(frozen=True)
-class SaturationQuantization:
+class SaturationQuantization(_OnSensors):
     """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high]."""
 
     name: ClassVar[str] = 'saturation_quantization'
@@ -191,10 +183,6 @@ class SaturationQuantization:
                                 self.high)
             return out
         return apply
-
-    @property
-    def location(self) -> list:
-        return list(self.sensors)
 
 
 @dataclass(frozen=True)
