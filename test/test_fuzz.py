@@ -67,6 +67,15 @@ def wait_for(condition: Callable[[], bool], timeout: float = TIMEOUT) -> bool:
     return nodes_fixtures.wait_for(condition, timeout)
 
 
+def drop_counters(robot, ctrl, mgr) -> dict:
+    """What each node of a running graph has dropped so far, by kind."""
+    return {'simulator malformed': robot.dropped['malformed'],
+            'simulator other_episode': robot.dropped['other_episode'],
+            'controller malformed': ctrl.dropped['malformed'],
+            'controller wrong_robots': ctrl.dropped['wrong_robots'],
+            'manager malformed': mgr.evaluator.dropped['malformed']}
+
+
 # topic: message type, header length, unpack
 TOPICS = {LIGHT: (Float64MultiArray, 2, protocol.unpack_light),
           CMD_TURN: (Int32MultiArray, 2, protocol.unpack_cmd_turn),
@@ -460,11 +469,7 @@ def test_fuzzing_the_simulator_graph_during_evaluations_changes_nothing():
                                           skip=MANAGER_CHECKED_LATER)}
 
         def counters() -> dict:
-            return {'simulator malformed': sim.dropped['malformed'],
-                    'simulator other_episode': sim.dropped['other_episode'],
-                    'controller malformed': ctrl.dropped['malformed'],
-                    'controller wrong_robots': ctrl.dropped['wrong_robots'],
-                    'manager malformed': mgr.evaluator.dropped['malformed']}
+            return drop_counters(sim, ctrl, mgr)
 
         forged = Messages(np.random.default_rng(7))
 
@@ -546,11 +551,7 @@ def test_fuzzing_the_hardware_bridge_during_evaluations_changes_nothing():
             msg('retries', ParameterType.PARAMETER_INTEGER, 2))}
 
         def counters() -> dict:
-            return {'simulator malformed': bridge.dropped['malformed'],
-                    'simulator other_episode': bridge.dropped['other_episode'],
-                    'controller malformed': ctrl.dropped['malformed'],
-                    'controller wrong_robots': ctrl.dropped['wrong_robots'],
-                    'manager malformed': mgr.evaluator.dropped['malformed']}
+            return drop_counters(bridge, ctrl, mgr)
 
         with running([bridge, ctrl, mgr, fuzzer], context) as crashed:
             mgr.evaluator.wait_ready(TIMEOUT)
