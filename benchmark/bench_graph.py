@@ -109,7 +109,7 @@ def main(argv=None) -> None:
     try:
         with processes(commands(args.steps, args.pairs)) as procs, \
                 local_graph(context, simulator={'steps': args.steps}, namespace='/bench_one',
-                            thread=False, bearings=False,
+                            thread=False, trace=False,
                             executor_class=events_executor) as graph:
             clients = {'3 processes': dict(robot_namespace='/split')} | {
                 f'{n} pairs': dict(workers=[f'/p{n}_{i}' for i in range(n)])
@@ -120,7 +120,7 @@ def main(argv=None) -> None:
                 node = Node(f'bench_{len(evaluators)}', context=context)
                 graph.executor.add_node(node)
                 evaluators[name] = GraphEvaluator(node, executor=graph.executor,
-                                                  bearings=False, **where)
+                                                  **where)
             for name, evaluate in evaluators.items():
                 if name != 'core':
                     evaluate.wait_ready(60)

@@ -47,7 +47,8 @@ from khepera_noise_ros.nodes.evolution_manager import MANAGER_SPECS, EvolutionMa
 from khepera_noise_ros.nodes.graph import episode_fitness
 from khepera_noise_ros.nodes.hardware_bridge import HardwareBridge
 from khepera_noise_ros.nodes.params import Spec, overrides
-from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, \
+    LIGHT
 from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots
 from khepera_noise_ros.reality.world import EmulatedWorld
@@ -80,7 +81,9 @@ def drop_counters(robot, ctrl, mgr) -> dict:
 TOPICS = {LIGHT: (Float64MultiArray, 2, protocol.unpack_light),
           CMD_TURN: (Int32MultiArray, 2, protocol.unpack_cmd_turn),
           BEARING: (Float64MultiArray, 2, protocol.unpack_bearing),
-          EPISODE_START: (Float64MultiArray, 1, protocol.unpack_episode_start)}
+          EPISODE_START: (Float64MultiArray, 1, protocol.unpack_episode_start),
+          FITNESS: (Float64MultiArray, 2, protocol.unpack_fitness)}
+TRACED = (LIGHT, CMD_TURN, BEARING, FITNESS)     # what a tracing manager subscribes to
 
 
 # --- messages that break the contract ------------------------------------------------------
@@ -114,6 +117,8 @@ class Messages:
             return np.column_stack([r.choice([-1, 1], robots), r.integers(0, 10, robots)])
         if topic == BEARING:
             return r.uniform(-180, 180, (robots, 1))
+        if topic == FITNESS:
+            return r.uniform(0, 1, (robots, 1))
         return np.column_stack([r.integers(0, 2 ** 53, robots).astype(float),
                                 r.uniform(-180, 180, robots)])
 
@@ -388,7 +393,7 @@ class Evaluations:
 
 def fuzz(fuzzer: Fuzzer, messages: Messages, requests: dict[str, Requests],
          counters: Callable[[], dict], rounds: int, mix: dict[str, float],
-         forge: Callable[[], None] | None = None) -> dict:
+         forge: Callable[[], None] | None = None, manager: tuple[str, ...] = TRACED) -> dict:
     """``rounds`` batches of messages (topic shares ``mix``) and of requests to every node.
 
     After each batch, wait until every node has counted what it was sent; every
@@ -409,22 +414,23 @@ def fuzz(fuzzer: Fuzzer, messages: Messages, requests: dict[str, Requests],
             for results in fuzzer.request(target, generator.batch(4)):
                 for result in results:
                     assert not result.successful and result.reason, (target, result)
-        expected = expected_counts(start, sent)
+        expected = expected_counts(start, sent, manager)
         assert wait_for(lambda: all(counters()[k] >= v for k, v in expected.items())), \
             (counters(), expected)
     return sent
 
 
-def expected_counts(start: dict, sent: dict) -> dict:
+def expected_counts(start: dict, sent: dict, manager: tuple[str, ...] = TRACED) -> dict:
     """Drop counters after ``sent``: every malformed message is counted by each node it
-    reaches, light for a batch the controller does not hold as wrong_robots, commands
-    for another episode as other_episode (the real run may add a few of those)."""
+    reaches (``manager``: the topics the manager subscribes to), light for a batch the
+    controller does not hold as wrong_robots, commands for another episode as
+    other_episode (the real run may add a few of those)."""
     want = {
         'simulator malformed': sent['malformed cmd_turn'] + sent['malformed episode_start'],
         'simulator other_episode': sent['foreign cmd_turn'],
         'controller malformed': sent['malformed light'],
         'controller wrong_robots': sent['foreign light'],
-        'manager malformed': sum(sent[f'malformed {t}'] for t in (LIGHT, CMD_TURN, BEARING))}
+        'manager malformed': sum(sent[f'malformed {t}'] for t in manager)}
     return {k: start.get(k, 0) + v for k, v in want.items() if k in start}
 
 
@@ -453,7 +459,7 @@ def test_fuzzing_the_simulator_graph_during_evaluations_changes_nothing():
         sim = Simulator(context=context, parameter_overrides=overrides(
             Simulator.parameter_specs(), {'steps': STEPS, 'resend_timeout_s': 0.05, **NOISE}))
         ctrl = Controller(context=context, parameter_overrides=overrides([GENOMES], {}))
-        mgr = EvolutionManager(context=context, bearings=True, parameter_overrides=overrides(
+        mgr = EvolutionManager(context=context, trace=True, parameter_overrides=overrides(
             MANAGER_SPECS, {'results_path': '', 'stall_timeout_s': 1.0,
                             'max_retries': 1000}))
         targets = ['simulator', 'controller', 'evolution_manager']
@@ -484,12 +490,13 @@ def test_fuzzing_the_simulator_graph_during_evaluations_changes_nothing():
 
         with running([sim, ctrl, mgr, fuzzer], context) as crashed:
             mgr.evaluator.wait_ready(TIMEOUT)
-            assert fuzzer.ready({LIGHT: 2, CMD_TURN: 2, EPISODE_START: 1, BEARING: 1})
+            assert fuzzer.ready({LIGHT: 2, CMD_TURN: 2, EPISODE_START: 1, BEARING: 1,
+                                 FITNESS: 1})
             before = {n: parameters(n) for n in (sim, mgr)}
             with Evaluations(mgr.evaluator, np.random.default_rng(3)) as evaluations:
                 sent = fuzz(fuzzer, Messages(rng), requests, counters, rounds=75,
-                            mix={LIGHT: 0.3, CMD_TURN: 0.3, EPISODE_START: 0.25,
-                                 BEARING: 0.15}, forge=forge)
+                            mix={LIGHT: 0.25, CMD_TURN: 0.25, EPISODE_START: 0.2,
+                                 BEARING: 0.15, FITNESS: 0.15}, forge=forge)
             after = {n: parameters(n) for n in (sim, mgr)}
             alive = {t: fuzzer.answers(t) for t in targets}
             final = counters()
@@ -555,11 +562,12 @@ def test_fuzzing_the_hardware_bridge_during_evaluations_changes_nothing():
 
         with running([bridge, ctrl, mgr, fuzzer], context) as crashed:
             mgr.evaluator.wait_ready(TIMEOUT)
-            assert fuzzer.ready({LIGHT: 2, CMD_TURN: 2, EPISODE_START: 1})
+            assert fuzzer.ready({LIGHT: 1, CMD_TURN: 1, EPISODE_START: 1, FITNESS: 1})
             before = parameters(bridge)
             with Evaluations(mgr.evaluator, np.random.default_rng(4)) as evaluations:
                 sent = fuzz(fuzzer, Messages(rng), requests, counters, rounds=30,
-                            mix={LIGHT: 0.35, CMD_TURN: 0.35, EPISODE_START: 0.3})
+                            mix={LIGHT: 0.3, CMD_TURN: 0.3, EPISODE_START: 0.25,
+                                 FITNESS: 0.15}, manager=(FITNESS,))
             after = parameters(bridge)
             alive = {t: fuzzer.answers(t) for t in targets}
             final = counters()
@@ -568,7 +576,7 @@ def test_fuzzing_the_hardware_bridge_during_evaluations_changes_nothing():
     assert evaluations.error is None, evaluations.error
     assert alive == dict.fromkeys(targets, True) and after == before
     assert backend is bridge.backend                         # never rebuilt
-    expected = expected_counts(dict.fromkeys(final, 0), sent)
+    expected = expected_counts(dict.fromkeys(final, 0), sent, manager=(FITNESS,))
     for kind in ('simulator malformed', 'controller malformed', 'controller wrong_robots',
                  'manager malformed'):
         assert final[kind] == expected[kind], (kind, final, expected)

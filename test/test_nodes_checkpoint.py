@@ -69,7 +69,7 @@ def test_a_run_interrupted_after_any_batch_resumes_to_the_uninterrupted_result(
     eas, done = core_run()
     results = tmp_path / 'run.json'
     checkpoint = tmp_path / 'run.checkpoint.json'
-    with local_graph(ros_context, simulator={'steps': STEPS}, thread=False, bearings=False,
+    with local_graph(ros_context, simulator={'steps': STEPS}, thread=False, trace=False,
                      executor_class=events_executor, manager={
                          'population': CONFIG.population, 'generations': CONFIG.generations,
                          'trials': TRIALS, 'seed': SEED, 'results_path': str(results)}) as graph:
@@ -100,7 +100,7 @@ def test_a_run_interrupted_after_any_batch_resumes_to_the_uninterrupted_result(
 
 def test_a_checkpoint_of_another_run_is_refused_unless_resume_is_off(ros_context, tmp_path):
     checkpoint = tmp_path / 'mine.json'
-    with local_graph(ros_context, simulator={'steps': STEPS}, thread=False, bearings=False,
+    with local_graph(ros_context, simulator={'steps': STEPS}, thread=False, trace=False,
                      executor_class=events_executor, manager={
                          'population': CONFIG.population, 'generations': CONFIG.generations,
                          'trials': TRIALS, 'seed': SEED, 'results_path': '',

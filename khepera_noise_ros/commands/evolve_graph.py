@@ -60,7 +60,7 @@ def run(args) -> int:
     rclpy.init(context=context, args=['--ros-args', '--log-level', args.log_level])
     try:
         with local_graph(context, simulator=simulator, manager=manager, cli_args=cli_args,
-                         namespace=args.namespace, thread=False, bearings=False,
+                         namespace=args.namespace, thread=False, trace=False,
                          executor_class=events_executor) as graph:
             start = time.monotonic()
             record = graph.manager.run()

@@ -274,7 +274,7 @@ class _Ros:
         self.executor.add_node(node)
         return node
 
-    def _evaluator(self, namespace: str, robot_node: str):
+    def _evaluator(self, namespace: str, robot_node: str, trace: bool = False):
         from rclpy.node import Node
         from ..nodes.controller import Controller
         from ..nodes.graph import GraphEvaluator
@@ -282,7 +282,7 @@ class _Ros:
         client = self._add(Node('replicate', context=self.context, namespace=namespace))
         evaluator = GraphEvaluator(client, controller_node=f'{namespace}/controller',
                                    robot_node=f'{namespace}/{robot_node}',
-                                   executor=self.executor)
+                                   executor=self.executor, trace=trace)
         evaluator.wait_ready(timeout_s=30.0)
         return evaluator
 
@@ -309,7 +309,7 @@ class _Ros:
         self._add(HardwareBridge(context=self.context, namespace=namespace,
                                  parameter_overrides=overrides(HardwareBridge.parameter_specs(),
                                                                values)))
-        return self._evaluator(namespace, 'hardware_bridge')
+        return self._evaluator(namespace, 'hardware_bridge', trace=True)
 
 
 def _executor(context):

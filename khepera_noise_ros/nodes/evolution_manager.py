@@ -155,10 +155,10 @@ def seed_genomes(values: dict[str, Any]) -> list[np.ndarray | None]:
 class EvolutionManager(Node):
     """Runs the EA through the graph; ``start()`` runs it in a worker thread."""
 
-    def __init__(self, node_name: str = 'evolution_manager', bearings: bool = False,
+    def __init__(self, node_name: str = 'evolution_manager', trace: bool = False,
                  **kwargs):
-        """``bearings``: also observe the bearing topic, so ``evaluator.trace()`` works (the
-        evolution itself needs only light and cmd_turn)."""
+        """``trace``: also observe every step, so ``evaluator.trace()`` works (the
+        evolution itself needs only each episode's fitness message)."""
         super().__init__(node_name, **kwargs)
         declare(self, MANAGER_SPECS)
         self.values = current(self, MANAGER_SPECS)
@@ -169,7 +169,7 @@ class EvolutionManager(Node):
             robot_node=v['robot_node'])
         self.evaluator = GraphEvaluator(
             self, stall_timeout_s=v['stall_timeout_s'], max_retries=v['max_retries'],
-            bearings=bearings, workers=list(v['workers']), capacity=v['worker_capacity'],
+            trace=trace, workers=list(v['workers']), capacity=v['worker_capacity'],
             **single)
         self._best_pub = self.create_publisher(Float64, BEST_FITNESS, 10)
         self.results: dict | None = None

@@ -4,9 +4,11 @@
 of a robot node and a controller, each in its own namespace), loads each
 part's genomes into its controller (the ``genomes`` parameter, through the
 SetParameters service), starts one batched episode on its robot node, and
-computes each genome's fitness from the light and cmd_turn messages it
-observes, with the core's ``step_fitness``, in the same float32 arithmetic as
-``core.task.run``.  Each robot's randomness comes from its own seed, so for the
+takes each genome's fitness from the robot node's ``fitness`` message, which
+scores the readings it published and the commands it applied with the core's
+``step_fitness``, in the same float32 arithmetic as ``core.task.run``.  With
+``trace=True`` it also observes every step's light, cmd_turn and bearing,
+recomputes the fitness from them and fails the episode if they disagree.  Each robot's randomness comes from its own seed, so for the
 same genomes, noise model and seeds it returns exactly the core's numbers,
 whatever the number of workers and however the batch is split.
 
@@ -63,14 +65,14 @@ class GraphEvaluator:
     ``workers``: namespaces or fnmatch patterns of the pairs; empty: the one pair in
     ``robot_namespace`` (whose ``controller_node`` and ``robot_node`` may be named).
     ``capacity``: most robots per episode on any worker (0: no limit but the ``ports``
-    a hardware bridge has).  With ``bearings=False`` it does not subscribe to
-    ``bearing``: one message less to take per step (fitness needs only light and
-    cmd_turn), but no ``trace()``.
+    a hardware bridge has).  ``trace``: observe every step (light, cmd_turn, bearing), so
+    that ``trace()`` works and each reported fitness is checked against the messages;
+    off, the evaluator takes one message per episode instead of three per step.
     """
 
     def __init__(self, node: Node, robot_namespace: str = '', controller_node: str = '',
                  robot_node: str = '', stall_timeout_s: float = 2.0, max_retries: int = 3,
-                 executor: Executor | None = None, bearings: bool = True,
+                 executor: Executor | None = None, trace: bool = False,
                  workers: Sequence[str] = (), capacity: int = 0):
         if workers and (robot_namespace or controller_node or robot_node):
             raise ValueError('give either workers or robot_namespace (with controller_node '
@@ -87,7 +89,7 @@ class GraphEvaluator:
         self.restarts = 0           # episode attempts that failed and were repeated
         self._ids = EpisodeIds()
         self._wake = threading.Event()
-        self._observed = (LIGHT, CMD_TURN, BEARING) if bearings else (LIGHT, CMD_TURN)
+        self._observed = (LIGHT, CMD_TURN, BEARING) if trace else ()
         specs = list(workers) or [robot_namespace]
         self.patterns = [s for s in specs if is_pattern(s)]
         self.workers: dict[str, Worker] = {}
@@ -143,8 +145,8 @@ class GraphEvaluator:
     def trace(self, genomes, seeds) -> Trace:
         """Per-step record of the episodes ``__call__`` would score, robots on axis 1."""
         if BEARING not in self._observed:
-            raise ValueError('this evaluator was made with bearings=False, so it does not see '
-                             'the bearing topic a trace needs')
+            raise ValueError('this evaluator was made with trace=False, so it does not see '
+                             'the per-step messages a trace needs')
         genomes, seeds = _batch(genomes, seeds)
         if not len(seeds):
             raise ValueError('trace() needs at least one genome')
@@ -447,11 +449,11 @@ def local_graph(context=None, simulator: dict | None = None, controller: dict | 
                 manager: dict | None = None, cli_args: list[str] | None = None,
                 namespace: str = '', thread: bool = True,
                 executor_class=SingleThreadedExecutor,
-                bearings: bool = True) -> Iterator[LocalGraph]:
+                trace: bool = True) -> Iterator[LocalGraph]:
     """Build the three nodes with these parameter dicts (and ``--ros-args`` cli_args such as
     a params file), and spin them: in a background thread, or (``thread=False``) by the
-    evaluator itself whenever it waits.  ``bearings``: the manager observes the bearing
-    topic too, so that ``evaluator.trace()`` works."""
+    evaluator itself whenever it waits.  ``trace``: the manager observes every step, so
+    that ``evaluator.trace()`` works."""
     from .controller import GENOMES, Controller
     from .evolution_manager import MANAGER_SPECS, EvolutionManager
     from .params import overrides
@@ -466,7 +468,7 @@ def local_graph(context=None, simulator: dict | None = None, controller: dict | 
         ctrl = Controller(parameter_overrides=overrides([GENOMES], controller), **common)
         nodes.append(ctrl)
         mgr = EvolutionManager(parameter_overrides=overrides(MANAGER_SPECS, manager),
-                               bearings=bearings, **common)
+                               trace=trace, **common)
         nodes.append(mgr)
     except BaseException:
         for node in nodes:

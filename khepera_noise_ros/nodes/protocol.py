@@ -8,6 +8,13 @@ paired across episodes or steps:
   cmd_turn     Int32MultiArray    [episode, step | B x (direction, power)]  controller -> robot
   bearing      Float64MultiArray  [episode, step | B x 1 lamp bearing, deg] robot (ground truth)
   episode_start Float64MultiArray [episode | B x (seed[, start bearing deg])] manager -> robot
+  fitness      Float64MultiArray  [episode, steps | B x 1 episode fitness]   robot -> manager
+
+``fitness`` is published once, when an episode has run all its steps: each
+robot's mean step fitness in [0, 1], summed in float32 as ``core.task.run``
+does from the readings published and the commands applied.  It is what lets
+an evolution manager, possibly on another machine, take one message per
+episode instead of two per step.
 
 Readings are 0 (brightest) .. 525 (darkest); direction is -1 (left) or +1
 (right), power 0..9; seeds are integers in [0, 2**53), start bearings finite
@@ -39,6 +46,7 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 from ..core.khepera import DARK, SENSORS
 
 LIGHT, CMD_TURN, BEARING, EPISODE_START = 'light', 'cmd_turn', 'bearing', 'episode_start'
+FITNESS = 'fitness'
 HEADER = 2                    # episode, step
 MAX_EPISODE = 2 ** 31         # episode ids and steps must fit cmd_turn's int32 header
 MAX_SEED = 2 ** 53            # seeds must be exact in a float64
@@ -192,6 +200,22 @@ def pack_bearing(episode: int, step: int, bearing_deg: np.ndarray, raw: bool = F
 def unpack_bearing(msg: Float64MultiArray | bytes) -> Batch:
     header, values = _unpack(msg, (1,), np.float64, BEARING)
     return Batch(*_header(header, BEARING), values)
+
+
+def pack_fitness(episode: int, steps: int, fitness: np.ndarray, raw: bool = False):
+    """fitness: (B,) episode fitness after ``steps`` steps."""
+    return _pack(Float64MultiArray, 'd', np.float64, (episode, steps),
+                 np.asarray(fitness, np.float64).reshape(-1, 1), 'fitness', raw)
+
+
+def unpack_fitness(msg: Float64MultiArray | bytes) -> Batch:
+    """Batch(episode, steps, fitness (B, 1))."""
+    header, values = _unpack(msg, (1,), np.float64, FITNESS)
+    episode, steps = _header(header, FITNESS)
+    if not (values.min() >= 0 and values.max() <= 1):           # NaN fails both
+        bad = values[~((values >= 0) & (values <= 1))][0]
+        raise Malformed(f'{FITNESS}: episode fitness must be in [0, 1], got {bad}')
+    return Batch(episode, steps, values)
 
 
 def pack_cmd_turn(episode: int, step: int, direction, power, raw: bool = False):

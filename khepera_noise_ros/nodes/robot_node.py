@@ -15,8 +15,11 @@ Lockstep: ``episode_start`` resets the backend and publishes ``light`` and
 else is counted and dropped, so a reading is never paired with another step's
 command.  With no matching command after ``resend_timeout_s`` the last
 messages are published again (same tags), at most ``MAX_RESENDS`` times a step.
-After the last step only ``bearing`` (episode, steps) is published: it marks
-the end of the episode.  ``bearing`` is packed and published only while some
+After the last step ``fitness`` (episode, steps) gives each robot's episode
+fitness, scored with ``core.task.step_fitness`` from the readings published
+and the commands applied (so the same way for a simulator and a hardware
+bridge), and ``bearing`` (episode, steps) marks the end; both are resent like
+any step's messages until the next episode starts.  ``bearing`` is packed and published only while some
 node subscribes to it (the evolution needs only light and cmd_turn).  A
 backend that fails (raises, or gives readings outside the contract) ends the
 episode (``end_episode``): nothing of it is resent, and its commands are
@@ -40,7 +43,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
 from ..core.khepera import DARK, SENSORS
-from ..core.task import Task
+from ..core.task import Task, step_fitness
 from . import Dropped, protocol
 from .params import (GEOMETRY_SPECS, TASK_SPECS, Spec, check_choice, current, declare,
                      proposed, task_from, world_from)
@@ -91,10 +94,14 @@ class RobotNode(Node):
         self._last_sent = 0.0
         self._resends = 0
         self._pending_cmd: protocol.Batch | None = None
+        self._readings: np.ndarray | None = None    # the current step's, float32
+        self._score: np.ndarray | None = None       # step fitness summed so far
         self._realtime_count = 0
         self._timer = None
         self._pub_light = self.create_publisher(Float64MultiArray, protocol.LIGHT, protocol.QOS)
         self._pub_bearing = self.create_publisher(Float64MultiArray, protocol.BEARING,
+                                                  protocol.QOS)
+        self._pub_fitness = self.create_publisher(Float64MultiArray, protocol.FITNESS,
                                                   protocol.QOS)
         # raw: the messages arrive serialized and protocol unpacks them with numpy
         self.create_subscription(Float64MultiArray, protocol.EPISODE_START,
@@ -190,6 +197,7 @@ class RobotNode(Node):
             self.end_episode(f'episode {episode} could not start: {exc}', error=True)
             return
         self.episode, self.step_index, self._pending_cmd = episode, 0, None
+        self._score = np.zeros(np.shape(readings)[1], np.float32)
         self._publish(readings)
 
     def _on_cmd_turn(self, msg: bytes) -> None:
@@ -226,6 +234,8 @@ class RobotNode(Node):
         return True
 
     def _step(self, cmd: np.ndarray) -> None:
+        # scored as core.task.run does: this step's readings with the command they got
+        self._score += step_fitness(self._readings, cmd[:, 1])
         try:
             readings = self.backend.step(cmd[:, 0], cmd[:, 1])
             if readings is not None:
@@ -242,6 +252,7 @@ class RobotNode(Node):
         episode, step = self.episode, self.step_index
         if readings is not None:
             self._robots = readings.shape[1]
+            self._readings = np.asarray(readings, np.float32)
         self._last = []
         if self._pub_bearing.get_subscription_count():
             bearing = self.backend.bearing_deg
@@ -252,6 +263,9 @@ class RobotNode(Node):
         if readings is not None:
             self._last.append((self._pub_light,
                                protocol.pack_light(episode, step, readings.T, raw=True)))
+        else:
+            self._last.append((self._pub_fitness, protocol.pack_fitness(
+                episode, step, self._score / np.float32(step), raw=True)))
         for pub, msg in self._last:
             pub.publish(msg)
         self._last_sent, self._resends = time.monotonic(), 0

@@ -5,9 +5,13 @@ loads a chunk's genomes into the controller (SetParameters) and reads the
 robot node's ``steps`` (and ``ports``, the robots a hardware bridge has);
 ``poll`` then publishes ``episode_start`` and reports the episode done,
 failed (stalled, or broke the protocol) or too large for the robot node.
-Its subscriptions fill the episode's arrays as light and cmd_turn arrive;
-messages tagged with another episode id are ignored, so a late answer from
-an earlier attempt can never be paired with the current one.
+The episode is done when the robot node's ``fitness`` message for it arrives:
+one message per episode, so that a manager on another machine is not flooded
+with two per step.  When the evaluator traces, the worker also observes
+light, cmd_turn and bearing at every step, and checks that the fitness the
+robot node reports is the one those messages give.  Messages tagged with
+another episode id are ignored, so a late answer from an earlier attempt can
+never be paired with the current one.
 
 ``discover`` finds worker namespaces in the ROS graph: wherever some node
 publishes ``<ns>/light`` and some node subscribes to ``<ns>/episode_start``.
@@ -33,9 +37,10 @@ from ..core.khepera import SENSORS
 from ..core.task import step_fitness
 from . import Dropped, protocol
 from .schedule import Cost
-from .protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+from .protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, LIGHT
 
 LIGHT_TYPE = 'std_msgs/msg/Float64MultiArray'
+FIRST_STEP_S = 0.05     # time allowed per step before a worker is measured (serial Khepera)
 
 
 class EpisodeFailed(RuntimeError):
@@ -68,8 +73,9 @@ class EpisodeIds:
 class Episode:
     """What the evaluator has observed of one episode; filled by the subscription callbacks.
 
-    Each topic's values go straight into a preallocated (steps, B, columns) array, in the
-    dtype the core computes with (readings float32), so that nothing is stacked at the end.
+    ``topics``: the per-step topics observed (none unless tracing).  Each one's values go
+    straight into a preallocated (steps, B, columns) array, in the dtype the core computes
+    with (readings float32), so that nothing is stacked at the end.
     """
 
     LAYOUT = {LIGHT: (SENSORS, np.float32), CMD_TURN: (2, np.int32), BEARING: (1, np.float64)}
@@ -79,6 +85,7 @@ class Episode:
         self.values = {t: np.empty((steps, robots, self.LAYOUT[t][0]), self.LAYOUT[t][1])
                        for t in topics}
         self.seen = {t: np.zeros(steps, bool) for t in topics}
+        self.score: np.ndarray | None = None       # the robot node's fitness, (B,)
         self.error: str | None = None
         self.complete = False
         self.progress = time.monotonic()
@@ -90,12 +97,45 @@ class Episode:
 
     @property
     def next_step(self) -> int:
-        """The first step some message is still missing for."""
-        return min(int(np.argmin(seen)) if not seen.all() else self.steps
-                   for seen in self.seen.values())
+        """The first step some observed message is still missing for."""
+        return min((int(np.argmin(seen)) if not seen.all() else self.steps
+                    for seen in self.seen.values()), default=0)
 
     def fitness(self) -> np.ndarray:
-        return episode_fitness(self.values[LIGHT], self.values[CMD_TURN][..., 1])
+        return self.score
+
+    def add_fitness(self, steps: int, values: np.ndarray) -> None:
+        if self.finished:
+            return
+        score = values[:, 0]
+        if steps != self.steps:
+            self.error = (f'fitness after {steps} steps, but the robot node has steps = '
+                          f'{self.steps} (was it changed during the episode?)')
+        elif score.shape[0] != self.robots:
+            self.error = (f'fitness for episode {self.episode} has {score.shape[0]} robots, '
+                          f'the episode has {self.robots}')
+        elif self.score is None:
+            self.score = score.copy()
+            self.progress = time.monotonic()
+            self._check_complete()
+        elif not np.array_equal(self.score, score):
+            self.error = (f'two different fitness messages for episode {self.episode}: two '
+                          'robot nodes in one namespace?')
+
+    def _check_complete(self) -> None:
+        """Complete once the fitness and every observed step are in; then the fitness
+        must be the one the observed readings and commands give."""
+        if self.score is None or self._count < len(self.values) * self.steps:
+            return
+        if LIGHT in self.values and CMD_TURN in self.values:
+            observed = episode_fitness(self.values[LIGHT], self.values[CMD_TURN][..., 1])
+            if not np.array_equal(observed, self.score):
+                robot = int(np.flatnonzero(observed != self.score)[0])
+                self.error = (f'the robot node reports fitness {self.score[robot]} for robot '
+                              f'{robot} of episode {self.episode}, its light and cmd_turn '
+                              f'messages give {observed[robot]}')
+                return
+        self.complete = True
 
     def add(self, topic: str, step: int, values: np.ndarray) -> None:
         if self.finished or (topic == BEARING and step == self.steps):   # final heading
@@ -111,7 +151,7 @@ class Episode:
             self.seen[topic][step] = True
             self.progress = time.monotonic()
             self._count += 1
-            self.complete = self._count == len(self.values) * self.steps
+            self._check_complete()
         elif not np.array_equal(self.values[topic][step],
                                 values.astype(self.values[topic].dtype)):
             self.error = (f'two different {topic} messages for ({self.episode}, {step}): '
@@ -165,7 +205,8 @@ class Worker:
                  robot_node: str = ''):
         self.node, self.dropped, self._wake = node, dropped, wake
         ns = namespace.rstrip('/')
-        self.topics = {n: _in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START)}
+        self.topics = {n: _in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START,
+                                               FITNESS)}
         self.name = node.resolve_topic_name(self.topics[LIGHT])[:-len(LIGHT) - 1] or '/'
         self.controller_node = controller_node or _in(ns, 'controller')
         self.robot_node = robot_node
@@ -175,9 +216,10 @@ class Worker:
                                                 protocol.QOS)
         unpack = {LIGHT: (Float64MultiArray, protocol.unpack_light),
                   CMD_TURN: (Int32MultiArray, protocol.unpack_cmd_turn),
-                  BEARING: (Float64MultiArray, protocol.unpack_bearing)}
+                  BEARING: (Float64MultiArray, protocol.unpack_bearing),
+                  FITNESS: (Float64MultiArray, protocol.unpack_fitness)}
         self.observed = observed
-        for topic in observed:
+        for topic in (*observed, FITNESS):
             msg_type, unpacker = unpack[topic]
             node.create_subscription(msg_type, self.topics[topic],
                                      self._observer(topic, unpacker), protocol.QOS, raw=True)
@@ -201,10 +243,13 @@ class Worker:
         missing = []
         if self._start_pub.get_subscription_count() < 1:
             missing.append(f'a robot node subscribed to {t[EPISODE_START]}')
-        if node.count_publishers(t[LIGHT]) < 1 or node.count_subscribers(t[CMD_TURN]) < 2:
-            missing.append(f'a robot node publishing {t[LIGHT]} and subscribed to '
-                           f'{t[CMD_TURN]}')
-        if node.count_publishers(t[CMD_TURN]) < 1 or node.count_subscribers(t[LIGHT]) < 2:
+        mine = 1 if self.observed else 0        # this evaluator's own subscriptions
+        if node.count_publishers(t[LIGHT]) < 1 or node.count_publishers(t[FITNESS]) < 1 \
+                or node.count_subscribers(t[CMD_TURN]) < 1 + mine:
+            missing.append(f'a robot node publishing {t[LIGHT]} and {t[FITNESS]} and '
+                           f'subscribed to {t[CMD_TURN]}')
+        if node.count_publishers(t[CMD_TURN]) < 1 \
+                or node.count_subscribers(t[LIGHT]) < 1 + mine:
             missing.append(f'a controller publishing {t[CMD_TURN]} and subscribed to '
                            f'{t[LIGHT]}')
         if not self._controller.services_are_ready():
@@ -273,6 +318,7 @@ class Worker:
         loaded = self._controller.set_parameters([ParameterMsg(
             name='genomes', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
                                                  double_array_value=self._genes))])
+        # two requests: one naming a parameter the node lacks (ports) returns no values
         self._requests = (loaded, robot.get_parameters(['steps']),
                           robot.get_parameters(['ports']))
         for future in self._requests:
@@ -304,16 +350,17 @@ class Worker:
 
     def _loaded(self) -> int:
         """The robot node's steps, once the genomes are in; learns its capacity."""
-        loaded, steps, ports = (f.result() for f in self._requests)
+        loaded, steps, ports = (f.result().values if i else f.result()
+                                for i, f in enumerate(self._requests))
         if not loaded.results[0].successful:
             raise EpisodeFailed(f'{self.controller_node} refused the genomes: '
                                 f'{loaded.results[0].reason}')
-        if not steps.values or steps.values[0].type != ParameterType.PARAMETER_INTEGER:
+        if not steps or steps[0].type != ParameterType.PARAMETER_INTEGER:
             raise EpisodeFailed(f'{self.robot_node} has no integer parameter steps: is it a '
                                 'robot node?')
-        if ports.values and ports.values[0].type == ParameterType.PARAMETER_STRING_ARRAY:
-            self.capacity = max(1, len(ports.values[0].string_array_value))
-        return steps.values[0].integer_value
+        if ports and ports[0].type == ParameterType.PARAMETER_STRING_ARRAY:
+            self.capacity = max(1, len(ports[0].string_array_value))
+        return steps[0].integer_value
 
     def _running(self, now: float, stall_timeout_s: float) -> tuple[str, str] | None:
         episode = self.episode
@@ -323,10 +370,26 @@ class Worker:
             return DONE, ''
         if episode.error is not None:
             return FAILED, f'episode {episode.episode}: {episode.error}'
-        if now - episode.progress < stall_timeout_s:
+        allowed = self.allowance(stall_timeout_s)
+        if now - episode.progress < allowed:
             return None
-        return FAILED, (f'episode {episode.episode} stalled at step {episode.next_step} of '
-                        f'{episode.steps}: no new message for {stall_timeout_s} s')
+        if self.observed:
+            return FAILED, (f'episode {episode.episode} stalled at step {episode.next_step} '
+                            f'of {episode.steps}: no new message for {stall_timeout_s} s')
+        return FAILED, (f'episode {episode.episode} stalled: no fitness within {allowed:.3g} s '
+                        f'(stall_timeout_s {stall_timeout_s} + twice the {episode.steps} '
+                        f'steps the worker is expected to take)')
+
+    def allowance(self, stall_timeout_s: float) -> float:
+        """How long the running episode may go without news.  Observing every step, that
+        is ``stall_timeout_s``; else its one message comes at the end, so add twice the
+        time its steps should take at this worker's measured speed."""
+        episode = self.episode
+        if self.observed:
+            return stall_timeout_s
+        model = self.cost.model
+        per_step = model[0] + model[1] * episode.robots if model else FIRST_STEP_S
+        return stall_timeout_s + 2 * episode.steps * per_step
 
     def release(self) -> None:
         """Forget the current chunk (after it is done or failed)."""
@@ -339,8 +402,9 @@ class Worker:
         return self._requests is None or all(f.done() for f in self._requests)
 
     def deadline(self, stall_timeout_s: float) -> float:
-        start = self._began if self.episode is None else self.episode.progress
-        return start + stall_timeout_s
+        if self.episode is None:
+            return self._began + stall_timeout_s
+        return self.episode.progress + self.allowance(stall_timeout_s)
 
     # --- leaving and coming back ----------------------------------------------------------
 
@@ -388,7 +452,10 @@ class Worker:
                 return
             episode = self.episode
             if episode is not None and batch.episode == episode.episode:
-                episode.add(topic, batch.step, batch.values)
+                if topic == FITNESS:
+                    episode.add_fitness(batch.step, batch.values)
+                else:
+                    episode.add(topic, batch.step, batch.values)
                 if episode.finished:
                     self._wake.set()
         return observe
