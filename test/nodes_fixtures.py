@@ -39,9 +39,10 @@ def controller(context, cls=Controller, cli_args=None, **values) -> Controller:
                parameter_overrides=overrides([GENOMES], values))
 
 
-def manager(context, **values) -> EvolutionManager:
+def manager(context, name: str = 'evolution_manager', trace: bool = False,
+            **values) -> EvolutionManager:
     values = {'results_path': '', 'ready_timeout_s': 20.0, **values}
-    return EvolutionManager(context=context,
+    return EvolutionManager(name, trace=trace, context=context,
                             parameter_overrides=overrides(MANAGER_SPECS, values))
 
 
@@ -50,8 +51,9 @@ class Probe(Node):
 
     def __init__(self, context):
         super().__init__('probe', context=context)
-        self.received: dict[str, list] = {t: [] for t in (protocol.LIGHT, protocol.BEARING,
-                                                          protocol.CMD_TURN, 'best_fitness')}
+        self.received: dict[str, list] = {t: [] for t in (
+            protocol.LIGHT, protocol.BEARING, protocol.CMD_TURN, protocol.FITNESS,
+            'best_fitness')}
         self._lock = threading.Lock()
         self.pub = {
             protocol.EPISODE_START: self.create_publisher(
@@ -63,6 +65,7 @@ class Probe(Node):
         for topic, msg_type in ((protocol.LIGHT, Float64MultiArray),
                                 (protocol.BEARING, Float64MultiArray),
                                 (protocol.CMD_TURN, Int32MultiArray),
+                                (protocol.FITNESS, Float64MultiArray),
                                 ('best_fitness', Float64)):
             self.create_subscription(msg_type, topic, self._recorder(topic), protocol.QOS)
 

@@ -14,7 +14,9 @@ from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.controller import Controller
 from khepera_noise_ros.nodes.graph import EpisodeFailed, local_graph, spinning
+from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.nodes.protocol import CMD_TURN
+from khepera_noise_ros.nodes.simulator import Simulator
 from nodes_fixtures import Probe, controller, manager, simulator, valid, wait_for
 
 STEPS = 20
@@ -122,6 +124,33 @@ def test_a_robot_node_restart_repeats_the_episode_with_the_same_seeds(ros_contex
         stop(executor, sim)
     np.testing.assert_array_equal(fitness, CORE(GENOMES[:2], SEEDS[:2]))
     assert mgr.evaluator.restarts >= 1
+
+
+class MisscoringSimulator(Simulator):
+    """Reports a fitness a little off the one its messages give, for one robot."""
+
+    def _publish(self, readings):
+        if readings is None:
+            self._score[1] += np.float32(0.5)
+        super()._publish(readings)
+
+
+def test_a_tracing_manager_refuses_a_fitness_its_messages_do_not_give(ros_context):
+    """Without tracing, the fitness message is taken as it is; tracing, every step is
+    observed and the episode fails with the robot and both values named."""
+    sim = MisscoringSimulator(context=ros_context, parameter_overrides=overrides(
+        Simulator.parameter_specs(), {'steps': STEPS, **NOISE}))
+    trusting, tracing = manager(ros_context), manager(ros_context, name='tracer', trace=True,
+                                                      max_retries=0)
+    with spinning([sim, controller(ros_context), trusting, tracing], ros_context):
+        trusting.evaluator.wait_ready()
+        fitness = trusting.evaluator(GENOMES[:2], SEEDS[:2])
+        tracing.evaluator.wait_ready()
+        with pytest.raises(EpisodeFailed, match=r'reports fitness [0-9.]+ for robot 1 of '
+                           r'episode \d+, its light and cmd_turn messages give [0-9.]+'):
+            tracing.evaluator(GENOMES[:2], SEEDS[:2])
+    expected = CORE(GENOMES[:2], SEEDS[:2])
+    assert fitness[0] == expected[0] and fitness[1] != expected[1]
 
 
 def test_an_episode_that_never_completes_fails_with_a_clear_error(ros_context):

@@ -9,14 +9,15 @@ import pytest
 from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.core.task import Episodes, Task
+from khepera_noise_ros.core.task import Episodes, Task, step_fitness
 from khepera_noise_ros.gap import effects as fx, simconfig
 from khepera_noise_ros.gap.simulate import EffectEpisodes
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.evolution_manager import EvolutionManager
 from khepera_noise_ros.nodes.graph import spinning
 from khepera_noise_ros.nodes.params import overrides
-from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, LIGHT
+from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, \
+    LIGHT
 from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.reality.khepera_robot import RobotUnreachable
 from nodes_fixtures import Probe, controller, simulator, valid, wait_for
@@ -31,14 +32,17 @@ def turn(episode, step, direction, power):
 
 def test_lockstep_steps_only_on_the_current_command(ros_context):
     """Each reading equals the core's for the same seeds and commands; stale, future and
-    other-episode commands are counted and change nothing; the end is a lone bearing."""
+    other-episode commands are counted and change nothing; the end is a bearing and the
+    episode's fitness, scored as core.task.run scores it."""
     sim = simulator(ros_context, steps=3, resend_timeout_s=60.0)
     probe = Probe(ros_context)
     commands = [([1, -1, 1], [3, 9, 0]), ([-1, -1, 1], [1, 2, 5]), ([1, 1, 1], [9, 9, 9])]
     core = Episodes(noise=NoiseModel(), task=Task(steps=3))
     expected = [core.reset(np.array(SEEDS), 3).T.copy()]
     expected_bearing = [core.bearing_deg.copy()]
+    score = np.zeros(3, np.float32)
     for direction, power in commands:
+        score += step_fitness(core.readings, np.array(power))
         readings = core.step(direction, power)
         expected.append(None if readings is None else readings.T.copy())
         expected_bearing.append(core.bearing_deg.copy())
@@ -71,6 +75,10 @@ def test_lockstep_steps_only_on_the_current_command(ros_context):
     assert sorted(bearings) == [0, 1, 2, 3]
     for step, bearing in bearings.items():
         np.testing.assert_array_equal(bearing, expected_bearing[step])
+    (fitness,) = {(b.episode, b.step, tuple(b.values[:, 0]))
+                  for b in map(protocol.unpack_fitness, probe.messages(FITNESS))}
+    assert fitness[:2] == (7, 3) and score.min() > 0
+    np.testing.assert_array_equal(fitness[2], (score / np.float32(3)).astype(np.float64))
 
 
 def test_a_lost_command_gets_the_light_resent_with_the_same_tag(ros_context):

@@ -101,7 +101,8 @@ def act(w: Weights, readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Turn commands (direction -1/+1, power 0..9) as int arrays of shape (B,)."""
     net = _output_net(w, readings)
     # logistic(net) < 0.5 exactly when net < 0: the direction needs no exp
-    direction = np.where(net[0] < 0, LEFT, RIGHT).astype(np.int32)
+    direction = np.where(net[0] < 0, np.int32(LEFT), np.int32(RIGHT))
     power = _logistic(net[1])
     power *= 10
-    return direction, np.minimum(power.astype(np.int32), 9)
+    power = power.astype(np.int32)
+    return direction, np.minimum(power, 9, out=power)

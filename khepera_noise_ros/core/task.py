@@ -47,17 +47,29 @@ def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
 
 def fitness_factors(readings: np.ndarray, power: np.ndarray):
     """(balance, intensity, turning), each (B,), from (>=6, B) readings and (B,) power."""
-    left = (readings[0] + readings[1] + readings[2]) * np.float32(1 / 3)
-    right = (readings[3] + readings[4] + readings[5]) * np.float32(1 / 3)
-    balance = 1.0 - np.abs(left - right) * np.float32(1 / DARK)
-    intensity = 1.0 - (readings[2] + readings[3]) * np.float32(0.5 / DARK)
+    # in place where possible: the same operations in the same order, fewer temporaries
+    left = readings[0] + readings[1]
+    left += readings[2]
+    left *= np.float32(1 / 3)
+    right = readings[3] + readings[4]
+    right += readings[5]
+    right *= np.float32(1 / 3)
+    balance = np.subtract(left, right, out=left)
+    np.abs(balance, out=balance)
+    balance *= np.float32(1 / DARK)
+    np.subtract(1.0, balance, out=balance)
+    intensity = readings[2] + readings[3]
+    intensity *= np.float32(0.5 / DARK)
+    np.subtract(1.0, intensity, out=intensity)
     turning = (np.asarray(power) != 0).astype(np.float32)
     return balance, intensity, turning
 
 
 def step_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
     balance, intensity, turning = fitness_factors(readings, power)
-    return balance * intensity * turning
+    balance *= intensity
+    balance *= turning
+    return balance
 
 
 class Episodes:

@@ -8,9 +8,10 @@ takes each genome's fitness from the robot node's ``fitness`` message, which
 scores the readings it published and the commands it applied with the core's
 ``step_fitness``, in the same float32 arithmetic as ``core.task.run``.  With
 ``trace=True`` it also observes every step's light, cmd_turn and bearing,
-recomputes the fitness from them and fails the episode if they disagree.  Each robot's randomness comes from its own seed, so for the
-same genomes, noise model and seeds it returns exactly the core's numbers,
-whatever the number of workers and however the batch is split.
+recomputes the fitness from them and fails the episode if they disagree.
+Each robot's randomness comes from its own seed, so for the same genomes,
+noise model and seeds it returns exactly the core's numbers, whatever the
+number of workers and however the batch is split.
 
 The split follows each worker's measured speed: the time a step takes it is
 fitted as a latency plus a cost per robot, and the shares are chosen so that

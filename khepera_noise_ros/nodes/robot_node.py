@@ -19,8 +19,9 @@ After the last step ``fitness`` (episode, steps) gives each robot's episode
 fitness, scored with ``core.task.step_fitness`` from the readings published
 and the commands applied (so the same way for a simulator and a hardware
 bridge), and ``bearing`` (episode, steps) marks the end; both are resent like
-any step's messages until the next episode starts.  ``bearing`` is packed and published only while some
-node subscribes to it (the evolution needs only light and cmd_turn).  A
+any step's messages until the next episode starts.  ``bearing`` is packed and
+published only while some node subscribes to it (the evolution needs only
+light, cmd_turn and fitness).  A
 backend that fails (raises, or gives readings outside the contract) ends the
 episode (``end_episode``): nothing of it is resent, and its commands are
 dropped as another episode's; the node keeps running.
