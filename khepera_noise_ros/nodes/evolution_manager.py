@@ -87,9 +87,10 @@ MANAGER_SPECS = (
     Spec('resume', True, 'Continue from the checkpoint when one of the same configuration '
          'exists (one of another configuration fails the start); false: start afresh and '
          'overwrite it.'),
-    Spec('stall_timeout_s', 2.0, 'An episode with no new message for this long has failed: it '
-         'is started again under a new id with the same seeds, on the other workers (this one '
-         'leaves the pool) when there are any.', 0.01, 3600.0),
+    Spec('stall_timeout_s', 2.0, 'An episode whose fitness is this late (after twice the time '
+         "the worker's measured speed predicts for it) has failed: it is started again under a "
+         'new id with the same seeds, on the other workers (this one leaves the pool) when '
+         'there are any.', 0.01, 3600.0),
     Spec('max_retries', 3, 'Failures of one episode before the evolution fails.', 0, 1000),
     Spec('ready_timeout_s', 30.0, 'How long to wait for the robot node and controller.',
          0.0, 86400.0),
