@@ -199,11 +199,17 @@ class GraphEvaluator:
     # --- waiting -------------------------------------------------------------------------
 
     def _wait(self, done: Callable[[], bool], timeout_s: float | Callable[[], float]) -> bool:
-        """Wait until done(); ``timeout_s`` may be a function giving the current deadline."""
+        """Wait until done(); ``timeout_s`` may be a function giving the current deadline,
+        which may move later but never earlier (it is asked again only once it seems to
+        have passed: asking after every callback cost a tenth of a lockstep step)."""
         start = time.monotonic()
         deadline = timeout_s if callable(timeout_s) else (lambda: start + timeout_s)
+        end = deadline()
         while not done():
-            left = deadline() - time.monotonic()
+            left = end - time.monotonic()
+            if left <= 0:
+                end = deadline()
+                left = end - time.monotonic()
             if left <= 0:
                 return False
             if self.executor is not None:
