@@ -10,9 +10,15 @@ share of the core's throughput at the same batch size:
   N pairs        N worker_pair processes (simulator + controller each), the batch
                  split across them by a GraphEvaluator here
 
-Every graph is first checked to give the core's fitness.  A second table gives
-the CPUs each process kept busy during the best window (this process, which
-is the manager, first), from /proc.
+Every graph is first checked to give the core's fitness.  The windows are
+interleaved: each round measures every configuration once, one after the
+other, so a round's figures share the machine's load.  The ratio is taken
+within each round (a configuration's rate over the core's in the same round)
+and the median over the rounds is printed, with the lowest and highest: on a
+shared machine whose speed drifts, that is steadier than a ratio of two best
+windows taken at different moments.  A second table gives the CPUs each
+process kept busy during its best window (this process, which is the
+manager, first), from /proc.
 
     python benchmark/bench_graph.py [--batches 2 64 1024] [--pairs 1 2 4] [--seconds 1]
 
@@ -98,14 +104,16 @@ def main(argv=None) -> None:
                         help='worker pair processes sharing each batch, one figure each')
     parser.add_argument('--steps', type=int, default=60)
     parser.add_argument('--seconds', type=float, default=1.0, help='per measuring window')
-    parser.add_argument('--rounds', type=int, default=3,
-                        help='windows per figure, interleaved; each figure is the best')
+    parser.add_argument('--rounds', type=int, default=5,
+                        help='windows per figure, interleaved; rates are the best window, '
+                        'ratios the median over rounds')
     args = parser.parse_args(argv)
 
     context = Context()
     rclpy.init(context=context, args=['--ros-args', '--log-level', 'warn'])
     best: dict[tuple[str, int], float] = {}
     cpus: dict[tuple[str, int], list[float]] = {}      # of the best window
+    ratios: dict[tuple[str, int], list[float]] = {}    # per round, against that round's core
     try:
         with processes(commands(args.steps, args.pairs)) as procs, \
                 local_graph(context, simulator={'steps': args.steps}, namespace='/bench_one',
@@ -128,13 +136,14 @@ def main(argv=None) -> None:
             for n in args.pairs:                    # in the order commands() started them
                 pids[f'{n} pairs'] = [p.pid for p in procs[start:start + n]]
                 start += n
-            measure(evaluators, pids, args, best, cpus)
+            measure(evaluators, pids, args, best, cpus, ratios)
     finally:
         context.try_shutdown()
-    report(best, cpus, args, list(evaluators))
+    report(best, cpus, ratios, args, list(evaluators))
 
 
-def measure(evaluators: dict, pids: dict, args, best: dict, cpus: dict) -> None:
+def measure(evaluators: dict, pids: dict, args, best: dict, cpus: dict,
+            ratios: dict) -> None:
     for batch in args.batches:
         rng = np.random.default_rng(batch)
         genomes = rng.uniform(-1, 1, (batch, 20))
@@ -145,26 +154,33 @@ def measure(evaluators: dict, pids: dict, args, best: dict, cpus: dict) -> None:
                 if not np.array_equal(evaluate(genomes, seeds), expected):
                     raise SystemExit(f'{name} gave other fitness than the core')
         for _ in range(args.rounds):       # interleaved: all share the same load
+            rates = {}
             for name, evaluate in evaluators.items():
                 rate, cpu = window(evaluate, genomes, seeds, args.steps, args.seconds,
                                    pids.get(name, []))
+                rates[name] = rate
                 if rate > best.get((name, batch), 0.0):
                     best[name, batch], cpus[name, batch] = rate, cpu
+            for name, rate in rates.items():
+                ratios.setdefault((name, batch), []).append(rate / rates['core'])
 
 
-def report(best: dict, cpus: dict, args, names: list[str]) -> None:
+def report(best: dict, cpus: dict, ratios: dict, args, names: list[str]) -> None:
     print(f'lockstep robot-steps per second, episodes of {args.steps} steps, best of '
           f'{args.rounds} interleaved {args.seconds:g} s windows ({os.cpu_count()} CPUs); '
-          'ratio: share of the core')
-    print(f"{'batch':>6} {'core':>9}" + ''.join(f' {n:>12} {"ratio":>6}' for n in names[1:]))
+          'ratio: share of the core, median over the rounds [lowest-highest]')
+    print(f"{'batch':>6} {'core':>9}" + ''.join(f' {n:>12} {"ratio":>17}' for n in names[1:]))
     for b in args.batches:
-        core = best['core', b]
-        print(f'{b:>6} {core:>9.0f}' + ''.join(
-            f' {best[n, b]:>12.0f} {best[n, b] / core:>6.1%}' for n in names[1:]))
+        print(f'{b:>6} {best["core", b]:>9.0f}' + ''.join(
+            f' {best[n, b]:>12.0f} {_spread(ratios[n, b]):>17}' for n in names[1:]))
     print('CPUs busy in those windows: this process (the manager) + each node process')
     for b in args.batches:
         print(f'{b:>6} ' + '; '.join(f"{n}: {' + '.join(f'{c:.2f}' for c in cpus[n, b])}"
                                      for n in names))
+
+
+def _spread(values: list[float]) -> str:
+    return (f'{np.median(values):.1%} [{min(values) * 100:.0f}-{max(values) * 100:.0f}]')
 
 
 if __name__ == '__main__':
