@@ -481,8 +481,8 @@ def test_fuzzing_the_simulator_graph_during_evaluations_changes_nothing():
 
         def forge() -> None:
             """A well-formed light or command for the running episode, some steps ahead:
-            the manager must notice two different messages for one step and repeat the
-            episode (a forgery for the last step would go unnoticed; see docs)."""
+            the tracing manager must notice two different messages for one step and repeat the
+            episode."""
             episode, step = sim.episode, sim.step_index
             if episode is not None and step + 3 < STEPS - 2:
                 topic = (LIGHT, CMD_TURN)[int(forged.rng.integers(2))]

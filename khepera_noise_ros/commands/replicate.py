@@ -206,8 +206,8 @@ def _simulation(config: settings.ReplicateConfig, ros) -> tuple:
     episodes = ConditionEpisodes(noise, config.world, config.task)
     return (batch_simulate(ros.simulator(config, episodes), episodes),
             "the node graph: a robot node over the core simulator, each condition's noise "
-            'model on its own robots of one batch, a controller node, and fitness computed '
-            'from the lockstep light and cmd_turn topics')
+            'model on its own robots of one batch, a controller node, and the fitness the '
+            'robot node scores from its lockstep light and cmd_turn topics')
 
 
 def _reality(config: settings.ReplicateConfig, ros, ports) -> tuple:

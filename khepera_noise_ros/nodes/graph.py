@@ -23,9 +23,10 @@ Workers are namespaces, or fnmatch patterns such as ``/worker*`` matched
 against the ROS graph before every batch, so that a worker that appears later
 is used from the next batch.
 
-An episode that stalls (no new message for ``stall_timeout_s``: a node died or
-stopped answering) or that breaks the protocol (two different messages with
-the same tag, a wrong robot count) is started again under a fresh episode id
+An episode that stalls (its fitness ``stall_timeout_s`` later than the
+worker's measured speed predicts, or tracing, no new message for that long: a
+node died or stopped answering) or that breaks the protocol (two different
+messages with the same tag, a wrong robot count) is started again under a fresh episode id
 with the same seeds, so the result does not change: on another worker when
 there is one (the failed worker leaves the pool, with a log line, until it
 answers again), else on the same one.  After ``max_retries`` failures of one
