@@ -73,15 +73,28 @@ def _layout(msg, robots: int, columns: int, label: str, offset: int):
     return msg
 
 
-def _pack(msg_type, typecode: str, dtype, header, values: np.ndarray, label: str,
-          raw: bool = False):
-    values = np.asarray(values)
-    robots, columns = values.shape
-    body = np.empty(len(header) + values.size, dtype)
+def _pack(msg_type, typecode: str, dtype, header, values, label: str, raw: bool = False,
+          cols: list | None = None):
+    """``values``: (B, columns); or None, and ``cols`` a list of the columns (B values each)."""
+    values = None if cols else np.asarray(values)
+    robots, columns = (np.size(cols[0]), len(cols)) if cols else values.shape
+    itemsize = np.dtype(dtype).itemsize
+    prefix = _cdr_prefix(robots, columns, label, len(header), itemsize) if raw else b''
+    # the serialized bytes are built in one buffer: prefix, header, values, one copy out
+    size = len(prefix) + (len(header) + robots * columns) * itemsize
+    shift = -len(prefix) % itemsize                 # so that the values are aligned
+    out = np.empty(size + shift, np.uint8)[shift:]
+    out[:len(prefix)] = np.frombuffer(prefix, np.uint8)
+    body = out[len(prefix):].view(dtype)
     body[:len(header)] = header
-    body[len(header):].reshape(robots, columns)[...] = values     # one pass, with the cast
+    table = body[len(header):].reshape(robots, columns)
+    if cols:
+        for k, col in enumerate(cols):
+            table[:, k] = col
+    else:
+        table[...] = values                                         # one pass, with the cast
     if raw:
-        return _cdr_prefix(robots, columns, label, len(header), body.itemsize) + body.tobytes()
+        return out.tobytes()
     msg = _layout(msg_type(), robots, columns, label, len(header))
     data = array.array(typecode)
     data.frombytes(memoryview(body).cast('B'))                   # one copy, no per-element loop
@@ -237,8 +250,8 @@ def unpack_fitness(msg: Float64MultiArray | bytes) -> Batch:
 
 def pack_cmd_turn(episode: int, step: int, direction, power, raw: bool = False):
     _check_tag(episode, step)
-    cmd = np.stack([np.asarray(direction), np.asarray(power)], axis=1)
-    return _pack(Int32MultiArray, 'i', np.int32, (episode, step), cmd, 'turn', raw)
+    return _pack(Int32MultiArray, 'i', np.int32, (episode, step), None, 'turn', raw,
+                 cols=[direction, power])
 
 
 def unpack_cmd_turn(msg: Int32MultiArray | bytes) -> Batch:
