@@ -202,7 +202,7 @@ class GraphEvaluator:
     def _wait(self, done: Callable[[], bool], timeout_s: float | Callable[[], float]) -> bool:
         """Wait until done(); ``timeout_s`` may be a function giving the current deadline,
         which may move later but never earlier (it is asked again only once it seems to
-        have passed: asking after every callback cost a tenth of a lockstep step)."""
+        have passed: asking after every callback took about 5% of a lockstep step)."""
         start = time.monotonic()
         deadline = timeout_s if callable(timeout_s) else (lambda: start + timeout_s)
         end = deadline()
