@@ -39,7 +39,13 @@ def spin_node(make_node: Callable[[], Node], args=None,
     try:
         node = make_node()
         if until is None:
-            rclpy.spin(node)
+            # rclpy's EventsExecutor costs a fraction of rclpy.spin's per callback; it is
+            # driven by spin_once (see graph.events_executor) and falls back to the default
+            from .graph import events_executor
+            executor = events_executor()
+            executor.add_node(node)
+            while rclpy.ok():
+                executor.spin_once(timeout_sec=1.0)
             return 0
         future = until(node)
         rclpy.spin_until_future_complete(node, future)
