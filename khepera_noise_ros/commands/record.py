@@ -96,10 +96,8 @@ class Recorder:
         self._queue: deque[int] = deque()
 
     def _on_light(self, msg) -> None:
-        try:
-            batch = self.protocol.unpack_light(msg)
-        except self.protocol.Malformed as exc:
-            self.dropped.add('malformed', str(exc))
+        batch = self.dropped.unpacked(self.protocol.unpack_light, msg)
+        if batch is None:
             return
         if batch.episode != self.wire_episode:
             self.dropped.add('other_episode', f'light for episode {batch.episode}', warn=False)
@@ -115,10 +113,8 @@ class Recorder:
         self._queue.append(batch.step)
 
     def _on_bearing(self, msg) -> None:
-        try:
-            batch = self.protocol.unpack_bearing(msg)
-        except self.protocol.Malformed as exc:
-            self.dropped.add('malformed', str(exc))
+        batch = self.dropped.unpacked(self.protocol.unpack_bearing, msg)
+        if batch is None:
             return
         if batch.episode == self.wire_episode and batch.values.shape[0] == 1:
             self._bearing.setdefault(batch.step, float(batch.values[0, 0]))

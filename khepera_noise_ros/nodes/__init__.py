@@ -19,6 +19,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 
+from .protocol import Malformed
+
 
 def spin_node(make_node: Callable[[], Node], args=None,
               until: Callable[[Node], Future] | None = None) -> int:
@@ -103,3 +105,11 @@ class Dropped(Counter):
         else:
             self._logger.debug(message)
         return False
+
+    def unpacked(self, unpack: Callable, msg):
+        """``unpack(msg)``, or None once a malformed message is counted with its reason."""
+        try:
+            return unpack(msg)
+        except Malformed as exc:
+            self.add('malformed', str(exc))
+            return None

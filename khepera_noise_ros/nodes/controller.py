@@ -76,10 +76,8 @@ class Controller(Node):
             self._weights = self._load(self.get_parameter(GENOMES.name).value)
 
     def _on_light(self, msg: bytes) -> None:
-        try:
-            batch = protocol.unpack_light(msg)
-        except protocol.Malformed as exc:
-            self.dropped.add('malformed', str(exc))
+        batch = self.dropped.unpacked(protocol.unpack_light, msg)
+        if batch is None:
             return
         weights = self._weights                 # one snapshot: a set may swap it meanwhile
         robots = _networks(weights)

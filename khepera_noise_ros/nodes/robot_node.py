@@ -176,11 +176,10 @@ class RobotNode(Node):
     # --- lockstep -----------------------------------------------------------------------
 
     def _on_episode_start(self, msg: bytes) -> None:
-        try:
-            episode, seeds, bearing = protocol.unpack_episode_start(msg)
-        except protocol.Malformed as exc:
-            self.dropped.add('malformed', str(exc))
+        start = self.dropped.unpacked(protocol.unpack_episode_start, msg)
+        if start is None:
             return
+        episode, seeds, bearing = start
         with self._lock:
             if episode == self.episode:
                 self.dropped.add('duplicate_start', f'episode {episode} already started',
@@ -202,10 +201,8 @@ class RobotNode(Node):
         self._publish(readings)
 
     def _on_cmd_turn(self, msg: bytes) -> None:
-        try:
-            batch = protocol.unpack_cmd_turn(msg)
-        except protocol.Malformed as exc:
-            self.dropped.add('malformed', str(exc))
+        batch = self.dropped.unpacked(protocol.unpack_cmd_turn, msg)
+        if batch is None:
             return
         with self._lock:
             if not self._matches(batch):

@@ -445,10 +445,8 @@ class Worker:
 
     def _observer(self, topic: str, unpack) -> Callable:
         def observe(msg) -> None:
-            try:
-                batch = unpack(msg)
-            except protocol.Malformed as exc:
-                self.dropped.add('malformed', str(exc))
+            batch = self.dropped.unpacked(unpack, msg)
+            if batch is None:
                 return
             episode = self.episode
             if episode is not None and batch.episode == episode.episode:
