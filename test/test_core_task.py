@@ -57,6 +57,19 @@ def test_perturbation_every_five_steps():
     assert np.abs(np.array(bearings)).max() <= 80
 
 
+def test_readings_follow_the_bearing_over_long_fast_turning_episodes():
+    """Bearings are wrapped only every few steps: the look-up must wrap them itself."""
+    world = khepera.World(deg_per_power=40.0)
+    env = task.Episodes(world, NoiseModel('none'), task.Task(steps=400, perturbation_deg=180))
+    readings, table = env.reset(np.arange(64)), world.light_table()
+    rng = np.random.default_rng(3)
+    while readings is not None:
+        index = khepera.to_tenths(env.bearing_deg)
+        assert np.array_equal(readings, table[:, index])
+        assert (np.abs(env.bearing_deg) <= 180).all()
+        readings = env.step(rng.choice([-1, 1], 64), rng.integers(7, 10, 64))
+
+
 def test_handwritten_controller_scores_like_figure_8():
     f = task.run(baseline.turn_toward_light, np.arange(400))
     assert 0.75 < f.mean() < 0.85       # the paper's evolved controller: 0.818

@@ -101,6 +101,42 @@ def test_malformed_messages_raise_with_the_reason(make, unpack, words):
         unpack(make())
 
 
+@pytest.mark.parametrize('dtype', [np.float32, np.float64])
+def test_within_is_the_closed_range_with_nan_and_inf_outside(dtype):
+    def ok(*values):
+        return protocol.within(np.array(values, dtype), 525.0)
+    assert ok(0.0, 525.0, 17.0) and ok(-0.0, 3.0)
+    for bad in (-1e-30, 525.00006, np.inf, -np.inf, np.nan, -np.nan):
+        assert not ok(1.0, bad, 2.0), bad
+
+
+@pytest.mark.parametrize('direction', [0, 2, -2, 3, -3, 2 ** 31 - 1, -2 ** 31, -2 ** 31 + 1])
+def test_every_direction_but_plus_and_minus_one_is_refused(direction):
+    raw = protocol.pack_cmd_turn(1, 0, [1, -1, direction, 1], [0, 9, 4, 2], raw=True)
+    with pytest.raises(protocol.Malformed, match=f'direction must be -1 or \\+1, got '
+                       f'{direction}$'):
+        protocol.unpack_cmd_turn(raw)
+    assert protocol.unpack_cmd_turn(protocol.pack_cmd_turn(1, 0, [1, -1], [0, 9], raw=True))
+
+
+@pytest.mark.parametrize('power', [-1, 10, -2 ** 31, 2 ** 31 - 1])
+def test_every_power_outside_0_to_9_is_refused(power):
+    raw = protocol.pack_cmd_turn(1, 0, [1, -1, 1], [0, power, 9], raw=True)
+    with pytest.raises(protocol.Malformed, match=f'power must be 0..9, got {power}$'):
+        protocol.unpack_cmd_turn(raw)
+
+
+def test_a_known_layout_still_refuses_bad_values_and_truncation():
+    good = protocol.pack_light(1, 2, READINGS.T, raw=True)
+    protocol.unpack_light(good)                       # now the topic's known layout
+    bad = protocol.pack_light(1, 3, np.where(READINGS.T > 100, 600.0, READINGS.T), raw=True)
+    with pytest.raises(protocol.Malformed, match='got 600'):
+        protocol.unpack_light(bad)
+    with pytest.raises(protocol.Malformed, match='truncated'):
+        protocol.unpack_light(good[:-8])
+    assert protocol.unpack_light(good).step == 2
+
+
 def test_tags_that_do_not_fit_the_int32_header_are_refused_when_packing():
     with pytest.raises(ValueError, match=r'\[0, 2\*\*31\)'):
         protocol.pack_cmd_turn(2 ** 31, 0, [1], [1])

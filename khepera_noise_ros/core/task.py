@@ -17,6 +17,9 @@ from . import streams
 from .khepera import DARK, TENTHS, World, to_degrees, to_tenths, turn
 from .noise import NoiseModel, realrand
 
+# A step moves a bearing by at most 9 x 40 deg of turn plus a 180 deg knock, so wrapping
+# every few steps keeps the grid index a few turns from the table.
+WRAP_EVERY = 8
 Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -36,13 +39,19 @@ class Task:
                              f'{self.perturbation_deg!r}')
 
 
+def knock_tenths(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
+    """The heading perturbation from the PERTURB channel, in tenths of a degree (int32,
+    not wrapped: within +-1800)."""
+    knock = (2 * realrand(perturb_draws) - 1) * task.perturbation_deg
+    return np.rint(knock.astype(np.float64) * 10).astype(np.int32)
+
+
 def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
-    """The heading perturbation, degrees on the 0.1 deg grid, from the PERTURB channel.
+    """The heading perturbation in degrees on the 0.1 deg grid, in [-180, 180).
 
     Shared with the hardware bridge so that simulator and robot get the same knocks.
     """
-    knock = (2 * realrand(perturb_draws) - 1) * task.perturbation_deg
-    return to_degrees(to_tenths(knock))
+    return to_degrees(knock_tenths(perturb_draws, task))
 
 
 def fitness_factors(readings: np.ndarray, power: np.ndarray):
@@ -95,7 +104,8 @@ class Episodes:
     @world.setter
     def world(self, world: World) -> None:
         self._world = world
-        self._table = world.light_table()
+        # bearing-major: a robot's 8 readings are one 32-byte row, one index per robot
+        self._table = np.ascontiguousarray(world.light_table().T)
 
     @property
     def robots(self) -> int:
@@ -133,11 +143,13 @@ class Episodes:
     def _sense(self) -> np.ndarray:
         draws = self._stream.draw(self.step_index, streams.GROUP.start + len(self.noise.groups))
         if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
-            self._bearing = self._bearing + to_tenths(knock_deg(draws[streams.PERTURB],
-                                                                self.task))
-        self._bearing %= TENTHS
-        # indices are in range after the modulo; 'clip' skips the bounds check of 'raise'
-        base = np.take(self._table, self._bearing, axis=1, mode='clip')
+            self._bearing = self._bearing + knock_tenths(draws[streams.PERTURB], self.task)
+        if self.step_index % WRAP_EVERY == 0:
+            self._bearing %= TENTHS
+        # 'wrap' costs a compare per robot where a modulo every step cost a division
+        rows = np.take(self._table, self._bearing, axis=0, mode='wrap')
+        base = np.empty(rows.shape[::-1], rows.dtype)
+        base[...] = rows.T
         return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
 
 
