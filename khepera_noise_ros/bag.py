@@ -4,7 +4,7 @@ The bag carries the node graph's own topics and message types (see
 ``nodes/protocol.py``), one robot per message, so ``ros2 bag play`` feeds a live
 graph or a plotting tool directly:
 
-  light                Float64MultiArray  [episode, step | 1 x C readings], NaN = unknown
+  light                Float64MultiArray  [episode, step | C x 1 readings], NaN = unknown
   bearing              Float64MultiArray  [episode, step | 1 x 1 lamp bearing, deg]
   cmd_turn             Int32MultiArray    [episode, step | 1 x (direction, power)]
   recording/manifest   String             the YAML manifest, once, first
@@ -115,10 +115,10 @@ def _multiarray(store, topic: str, key: tuple[int, int], values):
     label = {LIGHT: 'sensors', BEARING: 'bearing_deg', CMD_TURN: 'turn'}[topic]
     width = len(values)
     dim = store.types['std_msgs/msg/MultiArrayDimension']
-    layout = store.types['std_msgs/msg/MultiArrayLayout'](
-        dim=[dim(label='robots', size=1, stride=width),
-             dim(label=label, size=width, stride=width)],
-        data_offset=HEADER)
+    dims = [dim(label='robots', size=1, stride=width), dim(label=label, size=width, stride=width)]
+    if topic == LIGHT:                  # sensor-major, as the live topic
+        dims = [dim(label=label, size=width, stride=width), dim(label='robots', size=1, stride=1)]
+    layout = store.types['std_msgs/msg/MultiArrayLayout'](dim=dims, data_offset=HEADER)
     data = np.concatenate([np.asarray(key, dtype), np.asarray(values, np.float64).astype(dtype)])
     return store.types[TYPES[topic]](layout=layout, data=data)
 
@@ -191,7 +191,7 @@ class _Parsed:
             elif role == CONDITION:
                 self.conditions.append((*_condition(msg.data), where))
             elif role == LIGHT:
-                key, values = _unpack(msg, self.channels())
+                key, values = _unpack(msg, self.channels(), by_column=True)
                 self.light.append((key, values[0], index))
             else:
                 key, values = _unpack(msg, 1 if role == BEARING else 2)
@@ -276,14 +276,19 @@ def _condition(text: str) -> tuple[tuple[int, int], str]:
     return key, label
 
 
-def _unpack(msg, width: int) -> tuple[tuple[int, int], np.ndarray]:
-    """((episode, step), values (1, width)) after checking the layout against the data."""
+def _unpack(msg, width: int, by_column: bool = False) -> tuple[tuple[int, int], np.ndarray]:
+    """((episode, step), values (1, width)) after checking the layout against the data.
+
+    ``by_column`` (light): the layout is (width, 1 robot), as the live topic has it; for one
+    robot the data are the same either way, so (1 robot, width), as bags before it, reads too.
+    """
     data = np.asarray(msg.data, np.float64)
     dims = msg.layout.dim
     offset = msg.layout.data_offset
-    if len(dims) != 2 or dims[1].size != width or dims[0].size != 1:
-        shape = [d.size for d in dims]
-        raise ValueError(f'layout must be (1 robot, {width}), got {shape}')
+    shape = [d.size for d in dims]
+    if shape != [1, width] and not (by_column and shape == [width, 1]):
+        raise ValueError(f'layout must be ({width}, 1 robot), got {shape}' if by_column
+                         else f'layout must be (1 robot, {width}), got {shape}')
     if offset != HEADER or data.size != HEADER + width:
         raise ValueError(f'{data.size} values do not fit header {offset} + 1 x {width}')
     header = data[:HEADER]

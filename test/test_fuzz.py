@@ -122,12 +122,19 @@ class Messages:
         return np.column_stack([r.integers(0, 2 ** 53, robots).astype(float),
                                 r.uniform(-180, 180, robots)])
 
+    @staticmethod
+    def _layout(topic: str, body: np.ndarray) -> tuple[list, np.ndarray]:
+        """(dims, data after the header) of a (robots, columns) body: light is sensor-major."""
+        robots, columns = body.shape
+        if topic == LIGHT:
+            return [('x', columns), ('robots', robots)], body.T.ravel()
+        return [('robots', robots), ('x', columns)], body.ravel()
+
     def valid(self, topic: str, robots: int | None = None, header=None) -> bytes:
         robots = robots or int(self.rng.integers(1, 12))
-        body = self._body(topic, robots)
+        dims, flat = self._layout(topic, self._body(topic, robots))
         header = self._header(topic) if header is None else header
-        return _serialized(TOPICS[topic][0], [('robots', robots), ('x', body.shape[1])],
-                           len(header), np.concatenate([header, body.ravel()]))
+        return _serialized(TOPICS[topic][0], dims, len(header), np.concatenate([header, flat]))
 
     def foreign(self, topic: str) -> bytes:
         """Well formed, for a random episode id; light has a batch no controller holds."""
@@ -164,8 +171,8 @@ class Messages:
             for at in r.integers(0, len(out), int(r.integers(1, 5))):
                 out[at] = int(r.integers(256))
             return bytes(out)
-        dims = [('robots', robots), ('x', body.shape[1])]
-        data = np.concatenate([header, body.ravel()])
+        dims, flat = self._layout(topic, body)
+        data = np.concatenate([header, flat])
         if way == 3:                                            # wrong number of dimensions
             dims = [[], dims[:1], dims + [('z', 1)]][int(r.integers(3))]
         elif way == 4:                                          # wrong width or robot count
@@ -175,7 +182,7 @@ class Messages:
                 np.concatenate([data, data[:int(r.integers(1, 20))]])
         elif way == 6:                                          # header of the wrong size
             head = int(r.choice([0, head + 1, head + 3]))
-            data = np.concatenate([np.full(head, header[0]), body.ravel()])
+            data = np.concatenate([np.full(head, header[0]), flat])
         elif way == 7:                                          # header values out of range
             data[int(r.integers(len(header)))] = r.choice(
                 [-1, 2.0 ** 31, 0.5, np.nan, np.inf, -1e300] if msg_type is Float64MultiArray

@@ -101,6 +101,17 @@ def test_malformed_messages_raise_with_the_reason(make, unpack, words):
         unpack(make())
 
 
+def test_light_holds_one_row_of_robots_per_sensor():
+    """Sensor-major, as the network consumes it: no transpose on either side."""
+    readings = np.arange(8 * 3, dtype=np.float64).reshape(8, 3)     # (sensors, robots)
+    msg = protocol.pack_light(4, 5, readings.T)
+    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [('sensors', 8, 24),
+                                                                     ('robots', 3, 3)]
+    assert list(msg.data)[:5] == [4, 5, 0, 1, 2]            # header, then s0 of robots 0..2
+    for raw in (msg, protocol.pack_light(4, 5, readings.T, raw=True)):
+        assert np.array_equal(protocol.unpack_light(raw).values, readings.T)
+
+
 @pytest.mark.parametrize('dtype', [np.float32, np.float64])
 def test_within_is_the_closed_range_with_nan_and_inf_outside(dtype):
     def ok(*values):

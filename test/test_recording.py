@@ -260,7 +260,7 @@ def write_raw_bag(path, light_layout, with_manifest=True):
 
 @pytest.mark.parametrize('layout, with_manifest, message', [
     (((1, 8), 2, [0, 0] + [100] * 7), True, r'/light message 0: 9 values do not fit header'),
-    (((1, 6), 2, [0, 0] + [100] * 6), True, r'/light message 0: layout must be \(1 robot, 8\)'),
+    (((1, 6), 2, [0, 0] + [100] * 6), True, r'/light message 0: layout must be \(8, 1 robot\)'),
     (((1, 8), 2, [0, -1] + [100] * 8), True, r'/light message 0: header must be'),
     (((1, 8), 2, [0, 0] + [600] * 8), True, r'/light message 0: s0 must be a reading in'),
     (((1, 8), 2, [0, 0] + [100] * 8), False, 'no recording/manifest topic'),

@@ -81,7 +81,7 @@ def test_duplicated_readings_are_answered_but_kept_once(ros_context):
     repeat = echo.create_publisher(Float64MultiArray, protocol.LIGHT, protocol.QOS)
 
     def echo_light(msg):
-        if msg.layout.dim[0].label == 'robots':         # not our own echo
+        if msg.layout.dim[0].label == 'sensors':         # not our own echo
             repeat.publish(_relabelled(msg))
     echo.create_subscription(Float64MultiArray, protocol.LIGHT, echo_light, protocol.QOS)
     node = Node('recorder', context=ros_context)

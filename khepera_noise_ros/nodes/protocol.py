@@ -4,11 +4,16 @@ Every batched message is a std_msgs MultiArray whose padding (``data_offset``)
 carries a small header, so that a step's readings and commands can never be
 paired across episodes or steps:
 
-  light        Float64MultiArray  [episode, step | B x 8 readings]      robot -> controller
+  light        Float64MultiArray  [episode, step | 8 x B readings]      robot -> controller
   cmd_turn     Int32MultiArray    [episode, step | B x (direction, power)]  controller -> robot
   bearing      Float64MultiArray  [episode, step | B x 1 lamp bearing, deg] robot (ground truth)
   episode_start Float64MultiArray [episode | B x (seed[, start bearing deg])] manager -> robot
   fitness      Float64MultiArray  [episode, steps | B x 1 episode fitness]   robot -> manager
+
+``light`` alone is sensor-major (its layout: ``sensors`` 8, then ``robots`` B),
+the order the network consumes: neither end transposes the largest message of
+a step, which took a third of their message handling.  ``unpack_light`` still
+gives ``values`` as (B, 8), a view.
 
 ``fitness`` is published once, when an episode has run all its steps: each
 robot's mean step fitness in [0, 1], summed in float32 as ``core.task.run``
@@ -38,6 +43,7 @@ import array
 from dataclasses import dataclass
 from functools import lru_cache
 import struct
+from typing import NamedTuple
 
 import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -59,37 +65,57 @@ class Malformed(ValueError):
     """A message that breaks the contract; the reason names the field and value."""
 
 
-@dataclass(frozen=True)
-class Batch:
+class Batch(NamedTuple):     # a tuple: built twice a step, it must be cheap
     episode: int
     step: int
     values: np.ndarray        # (B, columns)
 
 
-def _layout(msg, robots: int, columns: int, label: str, offset: int):
-    msg.layout.dim = [MultiArrayDimension(label='robots', size=robots, stride=robots * columns),
-                      MultiArrayDimension(label=label, size=columns, stride=columns)]
+def _dims(robots: int, columns: int, label: str, by_column: bool) -> list[tuple]:
+    """(label, size, stride) of the two dimensions: robots first, or (``by_column``) the
+    columns first, each a row of B values."""
+    if by_column:
+        return [(label, columns, columns * robots), ('robots', robots, robots)]
+    return [('robots', robots, robots * columns), (label, columns, columns)]
+
+
+def _layout(msg, robots: int, columns: int, label: str, offset: int, by_column: bool = False):
+    msg.layout.dim = [MultiArrayDimension(label=name, size=size, stride=stride)
+                      for name, size, stride in _dims(robots, columns, label, by_column)]
     msg.layout.data_offset = offset
     return msg
 
 
 def _pack(msg_type, typecode: str, dtype, header, values, label: str, raw: bool = False,
-          cols: list | None = None):
-    """``values``: (B, columns); or None, and ``cols`` a list of the columns (B values each)."""
+          cols: list | None = None, by_column: bool = False):
+    """``values``: (B, columns); or None, and ``cols`` a list of the columns (B values each).
+    ``by_column``: the data hold each column's B values in turn (the layout says so)."""
+    if raw:     # few calls: at the sizes of a lockstep step, calls cost more than bytes
+        if cols:
+            robots, columns = np.size(cols[0]), len(cols)
+            table = np.empty((robots, columns), dtype)
+            for k, col in enumerate(cols):
+                table[:, k] = col
+        else:
+            values = np.asarray(values)
+            robots, columns = values.shape
+            table = np.asarray(values.T if by_column else values, dtype, order='C')
+        return b''.join((_cdr_prefix(robots, columns, label, len(header), table.itemsize,
+                                     by_column),
+                         struct.pack(f'<{len(header)}{typecode}', *header), table.tobytes()))
     values = None if cols else np.asarray(values)
     robots, columns = (np.size(cols[0]), len(cols)) if cols else values.shape
     body = np.empty(len(header) + robots * columns, dtype)
-    table = body[len(header):].reshape(robots, columns)
+    table = body[len(header):].reshape((columns, robots) if by_column else (robots, columns))
+    if by_column:
+        table = table.T
     if cols:
         for k, col in enumerate(cols):
             table[:, k] = col
     else:
         table[...] = values                                         # one pass, with the cast
-    if raw:     # few calls: at the sizes of a lockstep step, calls cost more than bytes
-        return b''.join((_cdr_prefix(robots, columns, label, len(header), body.itemsize),
-                         struct.pack(f'<{len(header)}{typecode}', *header), table.tobytes()))
     body[:len(header)] = header
-    msg = _layout(msg_type(), robots, columns, label, len(header))
+    msg = _layout(msg_type(), robots, columns, label, len(header), by_column)
     data = array.array(typecode)
     data.frombytes(body.tobytes())                  # one copy, no per-element loop
     msg.data = data
@@ -105,7 +131,8 @@ _CDR_LE = b'\x00\x01\x00\x00'
 
 
 @lru_cache(maxsize=64)
-def _cdr_prefix(robots: int, columns: int, label: str, offset: int, itemsize: int) -> bytes:
+def _cdr_prefix(robots: int, columns: int, label: str, offset: int, itemsize: int,
+                by_column: bool = False) -> bytes:
     """Everything before the first array element; it depends only on the shape."""
     out = bytearray(_CDR_LE)
 
@@ -113,7 +140,7 @@ def _cdr_prefix(robots: int, columns: int, label: str, offset: int, itemsize: in
         out.extend(b'\0' * (-(len(out) - 4) % 4))
         out.extend(struct.pack(fmt, *values))
     put('<I', 2)
-    for name, size, stride in (('robots', robots, robots * columns), (label, columns, columns)):
+    for name, size, stride in _dims(robots, columns, label, by_column):
         text = name.encode() + b'\0'
         put(f'<I{len(text)}s', len(text), text)
         put('<II', size, stride)
@@ -129,6 +156,7 @@ class _Layout:
     header: struct.Struct   # the data_offset elements before the values
     robots: int
     width: int
+    by_column: bool
 
 
 _KNOWN: dict[str, _Layout] = {}     # topic -> the layout its last good message had
@@ -166,9 +194,11 @@ def _cdr_fields(buf, dtype, name: str) -> tuple[int, list[int], np.ndarray, int]
         raise Malformed(f'{name}: serialized message is truncated or corrupt: {exc}') from None
 
 
-def _unpack(msg, columns: tuple[int, ...], dtype, name: str) -> tuple[tuple, np.ndarray]:
+def _unpack(msg, columns: tuple[int, ...], dtype, name: str, by_column: bool = False
+            ) -> tuple[tuple, np.ndarray]:
     """(header as Python numbers, values (B, columns)) after checking the layout against
-    the data; ``msg`` is a message or its serialized bytes.
+    the data; ``msg`` is a message or its serialized bytes.  ``by_column``: the layout is
+    (columns, robots), and the values are a view of the data transposed.
 
     A lockstep topic keeps one layout for a whole episode: serialized bytes that begin
     with the last good message's prefix have its layout, and skip the parse and checks
@@ -177,9 +207,11 @@ def _unpack(msg, columns: tuple[int, ...], dtype, name: str) -> tuple[tuple, np.
     known = _KNOWN.get(name) if type(msg) is bytes else None
     if known is not None and msg.startswith(known.prefix):
         try:
-            return (known.header.unpack_from(msg, len(known.prefix)), np.frombuffer(
-                msg, dtype, known.robots * known.width, len(known.prefix) + known.header.size
-            ).reshape(known.robots, known.width))
+            data = np.frombuffer(msg, dtype, known.robots * known.width,
+                                 len(known.prefix) + known.header.size)
+            return known.header.unpack_from(msg, len(known.prefix)), (
+                data.reshape(known.width, known.robots).T if known.by_column
+                else data.reshape(known.robots, known.width))
         except (struct.error, ValueError) as exc:
             raise Malformed(f'{name}: serialized message is truncated: {exc}') from None
     serialized = isinstance(msg, (bytes, bytearray, memoryview))
@@ -188,26 +220,33 @@ def _unpack(msg, columns: tuple[int, ...], dtype, name: str) -> tuple[tuple, np.
     else:
         offset, sizes = msg.layout.data_offset, [d.size for d in msg.layout.dim]
         data = np.frombuffer(msg.data, dtype=dtype) if len(msg.data) else np.empty(0, dtype)
+    shape = f'({columns[0]}, robots)' if by_column else f'(robots, {columns[0]})'
     if len(sizes) != 2:
-        raise Malformed(f'{name}: layout must have 2 dimensions (robots, {columns[0]}), '
-                        f'got {len(sizes)}')
-    robots, width = sizes
+        raise Malformed(f'{name}: layout must have 2 dimensions {shape}, got {len(sizes)}')
+    width, robots = sizes if by_column else sizes[::-1]
     if width not in columns:
-        raise Malformed(f'{name}: second dimension must be one of {columns}, got {width}')
+        raise Malformed(f'{name}: layout must be {shape} with '
+                        f'{" or ".join(map(str, columns))} columns, got {width}')
     if robots < 1 or data.size != offset + robots * width:
         raise Malformed(f'{name}: {data.size} values do not fit header {offset} + '
                         f'{robots} robots x {width}')
     if type(msg) is bytes and offset <= HEADER:
         _KNOWN[name] = _Layout(bytes(msg[:start]), struct.Struct(f'<{offset}{data.dtype.char}'),
-                               robots, width)
-    return tuple(data[:offset].tolist()), data[offset:].reshape(robots, width)
+                               robots, width, by_column)
+    values = data[offset:]
+    return tuple(data[:offset].tolist()), (values.reshape(width, robots).T if by_column
+                                           else values.reshape(robots, width))
 
 
 def _header(tag: tuple, name: str, size: int = HEADER) -> tuple[int, ...]:
-    if len(tag) != size or not all(0 <= h < MAX_EPISODE and h == int(h) for h in tag):
+    try:
+        ids = tuple(map(int, tag))
+    except (ValueError, OverflowError):                 # NaN, inf
+        ids = ()
+    if len(ids) != size or ids != tag or min(ids) < 0 or max(ids) >= MAX_EPISODE:
         raise Malformed(f'{name}: header must be {size} integers in [0, 2**31), got '
                         f'{list(tag)}')
-    return tuple(int(h) for h in tag)
+    return ids
 
 
 _BITS = {np.dtype(np.float32): np.uint32, np.dtype(np.float64): np.uint64}
@@ -236,11 +275,12 @@ def _check_tag(*tag: int) -> None:
 
 def pack_light(episode: int, step: int, readings: np.ndarray, raw: bool = False):
     """readings: (B, 8) for B robots; ``raw``: serialized bytes instead of a message."""
-    return _pack(Float64MultiArray, 'd', np.float64, (episode, step), readings, 'sensors', raw)
+    return _pack(Float64MultiArray, 'd', np.float64, (episode, step), readings, 'sensors', raw,
+                 by_column=True)
 
 
 def unpack_light(msg: Float64MultiArray | bytes) -> Batch:
-    header, values = _unpack(msg, (SENSORS,), np.float64, LIGHT)
+    header, values = _unpack(msg, (SENSORS,), np.float64, LIGHT, by_column=True)
     episode, step = _header(header, LIGHT)
     if not within(values, DARK):
         bad = values[~(np.isfinite(values) & (values >= 0) & (values <= DARK))][0]
@@ -283,14 +323,15 @@ def pack_cmd_turn(episode: int, step: int, direction, power, raw: bool = False):
 def unpack_cmd_turn(msg: Int32MultiArray | bytes) -> Batch:
     header, values = _unpack(msg, (2,), np.int32, CMD_TURN)
     episode, step = _header(header, CMD_TURN)
-    direction, power = values[:, 0], values[:, 1]
     # as uint32, -1 and +1 plus one are 0 and 2 (their OR keeps no other bit), and a
     # negative power is above 9: three calls where abs, !=, any, min, max took five
     bits = values.view(np.uint32)
     if np.bitwise_or.reduce(bits[:, 0] + np.uint32(1)) | 2 != 2:
+        direction = values[:, 0]
         raise Malformed(f'{CMD_TURN}: direction must be -1 or +1, got '
                         f'{direction[np.abs(direction) != 1][0]}')
     if bits[:, 1].max() > 9:
+        power = values[:, 1]
         raise Malformed(f'{CMD_TURN}: power must be 0..9, got '
                         f'{power[(power < 0) | (power > 9)][0]}')
     return Batch(episode, step, values)
