@@ -222,7 +222,7 @@ def test_worker_processes_join_late_and_a_killed_one_hands_its_work_on(ros_conte
     assert_same_evolution(record, eas)
     dropped = {w['namespace']: w['dropped'] for w in record['workers']}
     reason = dropped.pop(killed[0])     # stalled, or (killed as it finished) silent on loading
-    assert 'stalled: no fitness' in reason or 'no answer from the parameter services' in reason
+    assert 'stalled: no fitness' in reason or 'no answer within' in reason
     assert list(dropped.values()) == [None, None]
     assert record['episodes']['restarted'] >= 1
     err = capfd.readouterr().err

@@ -263,3 +263,66 @@ def test_no_command_is_answered_twice_by_the_wrong_genomes(ros_context):
             probe.messages(CMD_TURN), protocol.unpack_cmd_turn)))
     assert ctrl.dropped['wrong_robots'] == 1
     assert [b.step for b in valid(probe.messages(CMD_TURN), protocol.unpack_cmd_turn)] == [1]
+
+
+def test_tagged_genomes_answer_their_episode_and_the_running_one_is_kept(ros_context):
+    """Genomes on the topic answer only their episode (the parameter answers the others),
+    each is acknowledged, and genomes for other episodes never push out the running one."""
+    from std_msgs.msg import Float64MultiArray, Int32
+
+    from khepera_noise_ros.core import network
+    from khepera_noise_ros.nodes.controller import TAGGED
+    ctrl = controller(ros_context, genomes=GENOMES[:2].ravel().tolist())
+    probe = Probe(ros_context)
+    send = probe.create_publisher(Float64MultiArray, protocol.GENOMES, protocol.QOS)
+    acks = []
+    probe.create_subscription(Int32, protocol.GENOMES_LOADED, lambda m: acks.append(m.data),
+                              protocol.QOS)
+    readings = np.random.default_rng(1).integers(0, 526, (2, 8)).astype(float)
+
+    def answer(episode: int, step: int):
+        probe.publish(protocol.LIGHT, protocol.pack_light(episode, step, readings))
+        assert wait_for(lambda: any((b.episode, b.step) == (episode, step) for b in valid(
+            probe.messages(CMD_TURN), protocol.unpack_cmd_turn)))
+        return next(b.values for b in valid(probe.messages(CMD_TURN), protocol.unpack_cmd_turn)
+                    if (b.episode, b.step) == (episode, step))
+
+    def expected(genomes):
+        return np.column_stack(network.act(network.unpack(genomes),
+                                           readings.T.astype(np.float32)))
+    tagged = GENOMES[2:4] * -3
+    with spinning([ctrl, probe], ros_context):
+        assert probe.connected(protocol.LIGHT) and wait_for(
+            lambda: send.get_subscription_count() >= 1)
+        send.publish(protocol.pack_genomes(7, tagged))
+        assert wait_for(lambda: acks == [7])
+        np.testing.assert_array_equal(answer(7, 0), expected(tagged))
+        np.testing.assert_array_equal(answer(8, 0), expected(GENOMES[:2]))   # the parameter
+        for other in range(100, 100 + 3 * TAGGED):
+            send.publish(protocol.pack_genomes(other, GENOMES[:2]))
+        assert wait_for(lambda: len(acks) == 1 + 3 * TAGGED)
+        np.testing.assert_array_equal(answer(7, 1), expected(tagged))          # still held
+        assert sorted(ctrl._tagged) == [7] + list(range(100 + 2 * TAGGED, 100 + 3 * TAGGED))
+    assert acks == [7] + list(range(100, 100 + 3 * TAGGED))
+
+
+class ParameterOnlyController(Controller):
+    """A controller written to DESIGN.md's interface alone: no genomes topic."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        for sub in list(self.subscriptions):
+            if sub.topic_name.endswith('/' + protocol.GENOMES):
+                self.destroy_subscription(sub)
+
+
+def test_a_controller_without_the_genomes_topic_is_loaded_through_its_parameter(
+        ros_context):
+    nodes = [simulator(ros_context, steps=STEPS, **NOISE),
+             controller(ros_context, cls=ParameterOnlyController), manager(ros_context)]
+    with spinning(nodes, ros_context):
+        evaluator = nodes[2].evaluator
+        evaluator.wait_ready()
+        fitness = evaluator(GENOMES, SEEDS)
+    np.testing.assert_array_equal(fitness, CORE(GENOMES, SEEDS))
+    assert nodes[1].get_parameter('genomes').value.tolist() == GENOMES.ravel().tolist()

@@ -5,6 +5,13 @@ genes first).  Every ``light`` message with B robots is answered at once with
 the ``cmd_turn`` of the same (episode, step), computed by ``core.network.act``.
 A light message with a different number of robots, or a malformed one, is
 dropped and counted with a warning.
+
+An evolution manager sends each episode's genomes on the ``genomes`` topic
+instead, tagged with the episode id: the light of that episode is answered
+with them, whatever the parameter holds, and each is acknowledged on
+``genomes_loaded`` so that the manager starts the episode only once they are
+in.  The last ``TAGGED`` episodes' networks are kept, and always those of the
+episode running.
 """
 from __future__ import annotations
 
@@ -14,7 +21,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray, Int32MultiArray
+from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
 from ..core import network
 from . import Dropped, protocol, spin_node
@@ -24,6 +31,7 @@ GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: o
                f'robot of the episode, in the order of its seeds; genes within '
                f'+-{network.MAX_GENE:g}.',
                type_=Parameter.Type.DOUBLE_ARRAY)
+TAGGED = 4          # episodes whose tagged genomes are kept (one runs at a time)
 
 
 def genomes_from(value) -> np.ndarray:
@@ -47,9 +55,14 @@ class Controller(Node):
         declare(self, [GENOMES])
         self.dropped = Dropped(self)
         self._weights = self._load(self.get_parameter(GENOMES.name).value)
+        self._tagged: dict[int, network.Weights] = {}       # episode -> its networks
+        self._running: int | None = None        # the episode of the last light answered so
         self._pub = self.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
+        self._pub_loaded = self.create_publisher(Int32, protocol.GENOMES_LOADED, protocol.QOS)
         self.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
                                  protocol.QOS, raw=True)      # unpacked by protocol, numpy
+        self.create_subscription(Float64MultiArray, protocol.GENOMES, self._on_genomes,
+                                 protocol.QOS, raw=True)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
 
@@ -75,11 +88,29 @@ class Controller(Node):
         if any(p.name == GENOMES.name for p in params):
             self._weights = self._load(self.get_parameter(GENOMES.name).value)
 
+    def _on_genomes(self, msg: bytes) -> None:
+        tagged = self.dropped.unpacked(protocol.unpack_genomes, msg)
+        if tagged is None:
+            return
+        episode, genomes = tagged
+        self._tagged.pop(episode, None)
+        self._tagged[episode] = network.unpack(genomes)
+        # forget the oldest, but never the episode running: genomes for other episodes (of
+        # another manager, or a flood) must not stop it
+        others = [e for e in self._tagged if e != self._running]      # oldest first
+        for old in others[:max(0, len(others) - TAGGED)]:
+            del self._tagged[old]
+        self._pub_loaded.publish(Int32(data=episode))
+
     def _on_light(self, msg: bytes) -> None:
         batch = self.dropped.unpacked(protocol.unpack_light, msg)
         if batch is None:
             return
-        weights = self._weights                 # one snapshot: a set may swap it meanwhile
+        weights = self._tagged.get(batch.episode)
+        if weights is not None:
+            self._running = batch.episode
+        else:
+            weights = self._weights             # one snapshot: a set may swap it meanwhile
         robots = _networks(weights)
         if batch.values.shape[0] != robots:
             self.dropped.add('wrong_robots', f'light ({batch.episode}, {batch.step}) has '

@@ -290,11 +290,11 @@ class GraphEvaluator:
         while left:
             for worker in live:
                 if not worker.busy and (worker.queue or self._steal(worker, live)):
-                    worker.begin(worker.queue.popleft(), genomes)
+                    worker.begin(worker.queue.popleft(), genomes, self._ids)
             busy = [w for w in live if w.busy]
             news = False
             for worker in busy:
-                outcome = worker.poll(seeds, self._ids, self.stall_timeout_s)
+                outcome = worker.poll(seeds, self.stall_timeout_s)
                 if outcome is None:
                     continue
                 news = True

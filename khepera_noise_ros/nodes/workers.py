@@ -1,7 +1,9 @@
 """One worker pair as the evaluator sees it: a robot node and a controller in a namespace.
 
 A ``Worker`` runs at most one episode at a time, without blocking: ``begin``
-loads a chunk's genomes into the controller (SetParameters) and reads the
+loads a chunk's genomes into the controller (on its ``genomes`` topic, tagged
+with the episode id, and waits for ``genomes_loaded``; through the
+``genomes`` parameter for a controller that has no such topic) and reads the
 robot node's ``steps`` (and ``ports``, the robots a hardware bridge has);
 ``poll`` then publishes ``episode_start`` and reports the episode done,
 failed (stalled, or broke the protocol) or too large for the robot node.
@@ -31,13 +33,15 @@ import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rclpy.node import Node
 from rclpy.parameter_client import AsyncParameterClient
-from std_msgs.msg import Float64MultiArray, Int32MultiArray
+from rclpy.task import Future
+from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
 from ..core.khepera import SENSORS
 from ..core.task import step_fitness
 from . import Dropped, protocol
 from .schedule import Cost
-from .protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, LIGHT
+from .protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, GENOMES, GENOMES_LOADED, \
+    LIGHT
 
 LIGHT_TYPE = 'std_msgs/msg/Float64MultiArray'
 FIRST_STEP_S = 0.05     # time allowed per step before a worker is measured (serial Khepera)
@@ -206,7 +210,7 @@ class Worker:
         self.node, self.dropped, self._wake = node, dropped, wake
         ns = namespace.rstrip('/')
         self.topics = {n: _in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START,
-                                               FITNESS)}
+                                               FITNESS, GENOMES, GENOMES_LOADED)}
         self.name = node.resolve_topic_name(self.topics[LIGHT])[:-len(LIGHT) - 1] or '/'
         self.controller_node = controller_node or _in(ns, 'controller')
         self.robot_node = robot_node
@@ -214,6 +218,10 @@ class Worker:
         self._robot: AsyncParameterClient | None = None
         self._start_pub = node.create_publisher(Float64MultiArray, self.topics[EPISODE_START],
                                                 protocol.QOS)
+        self._genomes_pub = node.create_publisher(Float64MultiArray, self.topics[GENOMES],
+                                                  protocol.QOS)
+        node.create_subscription(Int32, self.topics[GENOMES_LOADED], self._on_loaded,
+                                 protocol.QOS)
         unpack = {LIGHT: (Float64MultiArray, protocol.unpack_light),
                   CMD_TURN: (Int32MultiArray, protocol.unpack_cmd_turn),
                   BEARING: (Float64MultiArray, protocol.unpack_bearing),
@@ -231,7 +239,9 @@ class Worker:
         self.capacity: int | None = None        # robots per episode (ports); None: any
         self.episodes = self.robots = self.failures = 0
         self._requests: tuple | None = None
-        self._genes = array.array('d')
+        self._id = 0                            # of the episode being loaded or run
+        self._genomes = np.empty((0, 20))
+        self._ack: Future | None = None         # genomes_loaded for self._id
         self._began = 0.0
         self._probe: tuple[float, list] | None = None
 
@@ -303,11 +313,11 @@ class Worker:
     def busy(self) -> bool:
         return self.chunk is not None
 
-    def begin(self, chunk: Chunk, genomes: np.ndarray) -> None:
-        """Start loading ``chunk`` (its genomes: the batch's rows lo..hi)."""
+    def begin(self, chunk: Chunk, genomes: np.ndarray, ids: EpisodeIds) -> None:
+        """Start loading ``chunk`` (its genomes: the batch's rows lo..hi) for a new
+        episode id."""
         self.chunk, self.episode, self._requests = chunk, None, None
-        self._genes = array.array('d', np.ascontiguousarray(genomes[chunk.lo:chunk.hi])
-                                  .tobytes())
+        self._id, self._genomes = next(ids), genomes[chunk.lo:chunk.hi]
         self._began = time.monotonic()
         self._send()
 
@@ -315,17 +325,27 @@ class Worker:
         robot = self.robot_client()
         if robot is None:
             return
-        loaded = self._controller.set_parameters([ParameterMsg(
-            name='genomes', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                                 double_array_value=self._genes))])
+        if self.node.count_subscribers(self.topics[GENOMES]):
+            self._ack = loaded = Future()
+            self._genomes_pub.publish(protocol.pack_genomes(self._id, self._genomes, raw=True))
+        else:                       # a controller with the parameter only
+            loaded = self._controller.set_parameters([ParameterMsg(
+                name='genomes', value=ParameterValue(
+                    type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                    double_array_value=array.array('d', np.ascontiguousarray(
+                        self._genomes, np.float64).tobytes())))])
         # two requests: one naming a parameter the node lacks (ports) returns no values
         self._requests = (loaded, robot.get_parameters(['steps']),
                           robot.get_parameters(['ports']))
         for future in self._requests:
             future.add_done_callback(lambda _: self._wake.set())
 
-    def poll(self, seeds: np.ndarray, ids: EpisodeIds, stall_timeout_s: float
-             ) -> tuple[str, str] | None:
+    def _on_loaded(self, msg: Int32) -> None:
+        ack = self._ack
+        if ack is not None and msg.data == self._id and not ack.done():
+            ack.set_result(True)
+
+    def poll(self, seeds: np.ndarray, stall_timeout_s: float) -> tuple[str, str] | None:
         """Advance the current chunk: None while it runs, else (DONE, ''),
         (FAILED, reason) or (TOO_LARGE, '') once ``capacity`` is known to be smaller."""
         now = time.monotonic()
@@ -336,23 +356,32 @@ class Worker:
         if self._requests is None or not all(f.done() for f in self._requests):
             if now - self._began < stall_timeout_s:
                 return None
-            return FAILED, (f'no answer from the parameter services of {self.controller_node} '
-                            f'and {self.robot_node or "a robot node"} within '
-                            f'{stall_timeout_s} s')
+            return FAILED, f'no answer within {stall_timeout_s} s from {self._awaited()}'
         steps = self._loaded()
         if self.capacity is not None and self.chunk.robots > self.capacity:
             return TOO_LARGE, ''
-        self.episode = Episode(next(ids), self.chunk.robots, steps, self.observed)
+        self.episode = Episode(self._id, self.chunk.robots, steps, self.observed)
         self.episodes += 1
         self._start_pub.publish(protocol.pack_episode_start(
             self.episode.episode, seeds[self.chunk.lo:self.chunk.hi], raw=True))
         return None
 
+    def _awaited(self) -> str:
+        """Who has not answered the loading requests yet."""
+        robot = f'the parameter services of {self.robot_node or "a robot node"}'
+        if self._requests is None:
+            return robot
+        loaded, *reads = self._requests
+        awaited = [] if loaded.done() else [
+            f'{self.controller_node} ({self.topics[GENOMES_LOADED]} for episode {self._id})'
+            if loaded is self._ack else f'the parameter services of {self.controller_node}']
+        return ' and '.join(awaited + ([] if all(f.done() for f in reads) else [robot]))
+
     def _loaded(self) -> int:
         """The robot node's steps, once the genomes are in; learns its capacity."""
         loaded, steps, ports = (f.result().values if i else f.result()
                                 for i, f in enumerate(self._requests))
-        if not loaded.results[0].successful:
+        if loaded is not True and not loaded.results[0].successful:
             raise EpisodeFailed(f'{self.controller_node} refused the genomes: '
                                 f'{loaded.results[0].reason}')
         if not steps or steps[0].type != ParameterType.PARAMETER_INTEGER:
@@ -393,7 +422,7 @@ class Worker:
 
     def release(self) -> None:
         """Forget the current chunk (after it is done or failed)."""
-        self.chunk, self.episode, self._requests = None, None, None
+        self.chunk, self.episode, self._requests, self._ack = None, None, None, None
 
     def news(self) -> bool:
         """Has something happened that poll() would act on?"""
