@@ -1,4 +1,6 @@
 """The robot, the light-centring task, the 6-2-2 network and the EA."""
+import re
+
 import numpy as np
 import pytest
 
@@ -108,6 +110,16 @@ def test_network_outputs_map_to_direction_and_power():
 def test_bad_genomes_are_named(bad):
     with pytest.raises(ValueError, match='gene'):
         network.check_genomes(bad)
+
+
+@pytest.mark.parametrize('value', [np.nan, np.inf, -np.inf, 1.0001e30, -2e30])
+def test_the_bad_gene_is_the_one_named(value):
+    genomes = np.zeros((3, network.GENES))
+    genomes[2, 7] = value
+    with pytest.raises(ValueError, match=re.escape(f'genome 2 gene 7 is {value};')):
+        network.check_genomes(genomes)
+    genomes[2, 7] = -1e30                               # the limit itself is a gene
+    assert network.check_genomes(genomes)[2, 7] == -1e30
 
 
 def test_ea_is_reproducible_and_improves():

@@ -326,3 +326,20 @@ def test_a_controller_without_the_genomes_topic_is_loaded_through_its_parameter(
         fitness = evaluator(GENOMES, SEEDS)
     np.testing.assert_array_equal(fitness, CORE(GENOMES, SEEDS))
     assert nodes[1].get_parameter('genomes').value.tolist() == GENOMES.ravel().tolist()
+
+
+def test_a_changed_steps_is_read_again_before_the_next_episode(ros_context):
+    """The evaluator keeps the robot node's steps between episodes; the node's parameter
+    event has it read them again, so no episode runs (and fails) on the old value."""
+    nodes = [simulator(ros_context, steps=STEPS, **NOISE), controller(ros_context),
+             manager(ros_context), Probe(ros_context)]
+    longer = CoreEvaluator(noise=CORE.noise, task=Task(steps=STEPS + 7))
+    with spinning(nodes, ros_context):
+        evaluator = nodes[2].evaluator
+        evaluator.wait_ready()
+        np.testing.assert_array_equal(evaluator(GENOMES, SEEDS), CORE(GENOMES, SEEDS))
+        assert nodes[3].set_parameters('simulator', steps=STEPS + 7)[0].successful
+        assert wait_for(lambda: evaluator.first._steps is None)
+        np.testing.assert_array_equal(evaluator(GENOMES, SEEDS), longer(GENOMES, SEEDS))
+        np.testing.assert_array_equal(evaluator(GENOMES, SEEDS), longer(GENOMES, SEEDS))
+    assert evaluator.restarts == 0

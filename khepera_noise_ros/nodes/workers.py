@@ -4,7 +4,9 @@ A ``Worker`` runs at most one episode at a time, without blocking: ``begin``
 loads a chunk's genomes into the controller (on its ``genomes`` topic, tagged
 with the episode id, and waits for ``genomes_loaded``; through the
 ``genomes`` parameter for a controller that has no such topic) and reads the
-robot node's ``steps`` (and ``ports``, the robots a hardware bridge has);
+robot node's ``steps`` (and ``ports``, the robots a hardware bridge has) when
+it has not yet, or they may have changed: a ``/parameter_events`` message of
+the robot node naming either, or a failed episode, has it read them again;
 ``poll`` then publishes ``episode_start`` and reports the episode done,
 failed (stalled, or broke the protocol) or too large for the robot node.
 The episode is done when the robot node's ``fitness`` message for it arrives:
@@ -30,9 +32,11 @@ import time
 from typing import Callable, Iterable
 
 import numpy as np
-from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterEvent, ParameterType, \
+    ParameterValue
 from rclpy.node import Node
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import qos_profile_parameter_events
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
@@ -222,6 +226,8 @@ class Worker:
                                                   protocol.QOS)
         node.create_subscription(Int32, self.topics[GENOMES_LOADED], self._on_loaded,
                                  protocol.QOS)
+        node.create_subscription(ParameterEvent, '/parameter_events', self._on_parameters,
+                                 qos_profile_parameter_events)
         unpack = {LIGHT: (Float64MultiArray, protocol.unpack_light),
                   CMD_TURN: (Int32MultiArray, protocol.unpack_cmd_turn),
                   BEARING: (Float64MultiArray, protocol.unpack_bearing),
@@ -239,6 +245,9 @@ class Worker:
         self.capacity: int | None = None        # robots per episode (ports); None: any
         self.episodes = self.robots = self.failures = 0
         self._requests: tuple | None = None
+        # the robot node's steps, read with its ports; kept until one of its parameter events
+        # names either, or an episode fails (a failure may be a stale value)
+        self._steps: int | None = None
         self._id = 0                            # of the episode being loaded or run
         self._genomes = np.empty((0, 20))
         self._ack: Future | None = None         # genomes_loaded for self._id
@@ -335,10 +344,16 @@ class Worker:
                     double_array_value=array.array('d', np.ascontiguousarray(
                         self._genomes, np.float64).tobytes())))])
         # two requests: one naming a parameter the node lacks (ports) returns no values
-        self._requests = (loaded, robot.get_parameters(['steps']),
-                          robot.get_parameters(['ports']))
+        self._requests = (loaded,) if self._steps is not None else (
+            loaded, robot.get_parameters(['steps']), robot.get_parameters(['ports']))
         for future in self._requests:
             future.add_done_callback(lambda _: self._wake.set())
+
+    def _on_parameters(self, event: ParameterEvent) -> None:
+        if event.node == self.robot_node and any(
+                p.name in ('steps', 'ports') for p in (
+                    *event.new_parameters, *event.changed_parameters, *event.deleted_parameters)):
+            self._steps = None
 
     def _on_loaded(self, msg: Int32) -> None:
         ack = self._ack
@@ -356,7 +371,7 @@ class Worker:
         if self._requests is None or not all(f.done() for f in self._requests):
             if now - self._began < stall_timeout_s:
                 return None
-            return FAILED, f'no answer within {stall_timeout_s} s from {self._awaited()}'
+            return self._fail(f'no answer within {stall_timeout_s} s from {self._awaited()}')
         steps = self._loaded()
         if self.capacity is not None and self.chunk.robots > self.capacity:
             return TOO_LARGE, ''
@@ -379,17 +394,21 @@ class Worker:
 
     def _loaded(self) -> int:
         """The robot node's steps, once the genomes are in; learns its capacity."""
-        loaded, steps, ports = (f.result().values if i else f.result()
-                                for i, f in enumerate(self._requests))
+        loaded, *reads = (f.result().values if i else f.result()
+                          for i, f in enumerate(self._requests))
         if loaded is not True and not loaded.results[0].successful:
             raise EpisodeFailed(f'{self.controller_node} refused the genomes: '
                                 f'{loaded.results[0].reason}')
+        if not reads:
+            return self._steps
+        steps, ports = reads
         if not steps or steps[0].type != ParameterType.PARAMETER_INTEGER:
             raise EpisodeFailed(f'{self.robot_node} has no integer parameter steps: is it a '
                                 'robot node?')
         if ports and ports[0].type == ParameterType.PARAMETER_STRING_ARRAY:
             self.capacity = max(1, len(ports[0].string_array_value))
-        return steps[0].integer_value
+        self._steps = steps[0].integer_value
+        return self._steps
 
     def _running(self, now: float, stall_timeout_s: float) -> tuple[str, str] | None:
         episode = self.episode
@@ -398,16 +417,20 @@ class Worker:
             self.robots += episode.robots
             return DONE, ''
         if episode.error is not None:
-            return FAILED, f'episode {episode.episode}: {episode.error}'
+            return self._fail(f'episode {episode.episode}: {episode.error}')
         allowed = self.allowance(stall_timeout_s)
         if now - episode.progress < allowed:
             return None
         if self.observed:
-            return FAILED, (f'episode {episode.episode} stalled at step {episode.next_step} '
-                            f'of {episode.steps}: no new message for {stall_timeout_s} s')
-        return FAILED, (f'episode {episode.episode} stalled: no fitness within {allowed:.3g} s '
-                        f'(stall_timeout_s {stall_timeout_s} + twice the {episode.steps} '
-                        f'steps the worker is expected to take)')
+            return self._fail(f'episode {episode.episode} stalled at step {episode.next_step} '
+                              f'of {episode.steps}: no new message for {stall_timeout_s} s')
+        return self._fail(f'episode {episode.episode} stalled: no fitness within '
+                          f'{allowed:.3g} s (stall_timeout_s {stall_timeout_s} + twice the '
+                          f'{episode.steps} steps the worker is expected to take)')
+
+    def _fail(self, reason: str) -> tuple[str, str]:
+        self._steps = None                  # read again: a changed steps may be the cause
+        return FAILED, reason
 
     def allowance(self, stall_timeout_s: float) -> float:
         """How long the running episode may go without news.  Observing every step, that
