@@ -33,12 +33,12 @@ def scores(out) -> dict:
 def test_the_graph_and_the_bridge_give_the_in_process_numbers(tiny, tmp_path, monkeypatch):
     served = []
 
-    class Recorded(replicate.Emulator):
+    class Recorded(replicate.EmulatorProcess):
         def __exit__(self, *exc):
-            served.extend(self.served(r) for r in range(len(self.robots)))
             super().__exit__(*exc)
+            served.extend(self.served(r) for r in range(len(self.ports)))
 
-    monkeypatch.setattr(replicate, 'Emulator', Recorded)
+    monkeypatch.setattr(replicate, 'EmulatorProcess', Recorded)
     graph, core = tmp_path / 'graph', tmp_path / 'core'
     assert cli.main(['replicate', '--config', str(tiny), '--out', str(graph),
                      '--no-progress']) == 0
@@ -61,7 +61,8 @@ def test_port_makes_the_robots_on_those_ports_reality(tiny, tmp_path):
     from khepera_noise_ros.experiment import config as settings
     config = settings.load(tiny)
     world = replicate._world(config)
-    with replicate.Emulator(world) as emulator:
+    from khepera_noise_ros.reality.emulator import Emulator
+    with Emulator(world) as emulator:
         ports = sum((['--port', p] for p in emulator.ports), [])
         assert cli.main(['replicate', '--config', str(tiny), '--out', str(tmp_path / 'hw'),
                          '--no-progress', '--backend', 'core', *ports]) == 0

@@ -11,7 +11,7 @@ import serial
 
 from khepera_noise_ros.reality import serial_protocol as sp
 from khepera_noise_ros.reality.effects import EffectsConfig
-from khepera_noise_ros.reality.emulator import Emulator
+from khepera_noise_ros.reality.emulator import Emulator, EmulatorProcess
 from khepera_noise_ros.reality.world import EmulatedWorld
 
 QUIET = EffectsConfig.none(sensor_noise=0.0)
@@ -132,6 +132,22 @@ def test_unplug_and_stop_remove_the_devices():
     emulator.stop()
     emulator.stop()                                             # twice is fine
     assert not emulator._thread.is_alive() and not os.path.exists(ports[1])
+
+
+def test_an_emulator_process_serves_like_the_thread_and_leaves_nothing_behind():
+    """The same world answers the same from a child process; its devices go with it."""
+    def readings(emulator):
+        with open_port(emulator.ports[1]) as port:
+            talk(port, sp.format_command('Z', sp.Z_BEARING, 30.0))
+            return [sp.parse_reply(talk(port, b'O\r'), 'O') for _ in range(5)]
+    with Emulator(EmulatedWorld(seed=4, robots=2)) as thread:
+        expected = readings(thread)
+    with EmulatorProcess(EmulatedWorld(seed=4, robots=2)) as child:
+        ports, process = child.ports, child._process
+        assert process.pid != os.getpid() and process.is_alive()
+        assert readings(child) == expected
+    assert not process.is_alive() and not any(os.path.exists(p) for p in ports)
+    assert child.served(1) == {'Z': 1, 'O': 5} and child.served(0) == {}
 
 
 def test_emulate_command_prints_its_devices_and_stops_on_sigterm():

@@ -23,7 +23,7 @@ from ..experiment import report
 from ..experiment.protocol import Backends, ConditionEpisodes, Experiment, batch_simulate, \
     chunked, chunked_trace, core_simulate, play
 from ..experiment.store import Store
-from ..reality.emulator import Emulator
+from ..reality.emulator import EmulatorProcess
 from ..reality.khepera_robot import InProcessRobots, KheperaRobots
 from ..reality.world import EmulatedWorld
 
@@ -185,8 +185,8 @@ def open_backends(config: settings.ReplicateConfig, ports=None):
     """The evaluators the config's ``backend`` names; every node and port closed on exit."""
     which = config.backend
     with contextlib.ExitStack() as stack:
-        if which['reality'] == 'emulator':      # entered first: it must outlive the bridge
-            ports = stack.enter_context(Emulator(_world(config))).ports
+        if which['reality'] == 'emulator':      # first: it must outlive the bridge, and be
+            ports = stack.enter_context(EmulatorProcess(_world(config))).ports  # forked pre-ROS
         ros = stack.enter_context(_Ros()) if which['simulation'] == 'graph' \
             or which['reality'] in ('emulator', 'hardware') else None
         simulate, sim_text = _simulation(config, ros)

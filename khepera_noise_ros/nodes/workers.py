@@ -334,7 +334,7 @@ class Worker:
         robot = self.robot_client()
         if robot is None:
             return
-        if self.node.count_subscribers(self.topics[GENOMES]):
+        if self._genomes_pub.get_subscription_count():
             self._ack = loaded = Future()
             self._genomes_pub.publish(protocol.pack_genomes(self._id, self._genomes, raw=True))
         else:                       # a controller with the parameter only

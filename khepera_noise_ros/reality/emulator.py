@@ -339,3 +339,63 @@ class Emulator:
             except OSError:
                 pass
         self._wake_r = self._wake_w = -1
+
+
+class EmulatorProcess:
+    """An ``Emulator`` serving from a child process; use as a context manager.
+
+    The robots then answer on the machine's other core instead of taking turns
+    with the bridge, controller and manager for one interpreter lock.  The child
+    is forked before the caller starts ROS (it must be: forking copies no DDS
+    threads then), stops when the context exits or the parent dies, and ignores
+    Ctrl-C, which the parent handles.  ``ports`` is there while it runs, and
+    ``served`` once it has stopped.
+    """
+
+    def __init__(self, world: EmulatedWorld, **kwargs):
+        self._args = (world, kwargs)
+        self._conn = self._process = None
+        self.ports: list[str] = []
+        self._served: list[Counter] = []
+
+    def served(self, robot: int) -> Counter:
+        """Commands ``robot`` answered, by letter (known once the process has stopped)."""
+        return Counter(self._served[robot]) if self._served else Counter()
+
+    def __enter__(self) -> 'EmulatorProcess':
+        import multiprocessing
+        forking = multiprocessing.get_context('fork')
+        self._conn, child = forking.Pipe()
+        self._process = forking.Process(target=_serve_child, args=(*self._args, child),
+                                        name='khepera-emulator', daemon=True)
+        self._process.start()
+        child.close()
+        if not self._conn.poll(30.0):
+            self.__exit__()
+            raise RuntimeError('the emulator process did not open its devices within 30 s')
+        self.ports = self._conn.recv()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self._conn.send('stop')
+            if self._conn.poll(5.0):
+                self._served = self._conn.recv()
+        except (OSError, ValueError, EOFError):
+            pass
+        self._process.join(5.0)
+        if self._process.is_alive():
+            self._process.kill()
+        self._conn.close()
+
+
+def _serve_child(world: EmulatedWorld, kwargs: dict, conn) -> None:
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with Emulator(world, **kwargs) as emulator:
+        conn.send(emulator.ports)
+        try:
+            conn.recv()                     # 'stop', or EOF when the parent is gone
+            conn.send([emulator.served(r) for r in range(len(emulator.robots))])
+        except (EOFError, OSError):
+            pass
