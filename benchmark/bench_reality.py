@@ -1,12 +1,12 @@
 """Speed of the serial reality: KheperaRobots over SerialRobots on the emulator's ptys.
 
-The emulator serves from a thread of this process, as ``khepera-noise replicate`` runs
-it.  Each size runs ``--episodes`` closed-loop episodes of ``--steps`` steps (the
+The emulator serves from a child process, as ``khepera-noise replicate`` runs it
+(``--thread``: from a thread of this process, as before, sharing its interpreter).  Each size runs ``--episodes`` closed-loop episodes of ``--steps`` steps (the
 hand-written controller) ``--repeat`` times and prints the best: batch steps per second
 (one step of every robot) and robot-steps per second.  Figures, not assertions: timing
 depends on the machine and its load.
 
-    python benchmark/bench_reality.py --robots 12 40
+    python benchmark/bench_reality.py --robots 12 40 [--thread]
 """
 import argparse
 import time
@@ -15,7 +15,7 @@ import numpy as np
 
 from khepera_noise_ros.core import baseline
 from khepera_noise_ros.core.task import Task
-from khepera_noise_ros.reality.emulator import Emulator
+from khepera_noise_ros.reality.emulator import Emulator, EmulatorProcess
 from khepera_noise_ros.reality.khepera_robot import KheperaRobots
 from khepera_noise_ros.reality.world import EmulatedWorld
 
@@ -32,9 +32,12 @@ def main() -> None:
     parser.add_argument('--episodes', type=int, default=3)
     parser.add_argument('--steps', type=int, default=60)
     parser.add_argument('--repeat', type=int, default=3)
+    parser.add_argument('--thread', action='store_true',
+                        help='serve from a thread of this process instead of a child process')
     args = parser.parse_args()
     for robots in args.robots:
-        with Emulator(EmulatedWorld(seed=1, robots=robots)) as emulator:
+        serving = Emulator if args.thread else EmulatorProcess
+        with serving(EmulatedWorld(seed=1, robots=robots)) as emulator:
             backend = KheperaRobots.on_ports(emulator.ports, task=Task(steps=args.steps))
             episode(backend, np.arange(robots))              # opens the ports
             best = float('inf')
