@@ -1,10 +1,11 @@
 """Speed of the serial reality: KheperaRobots over SerialRobots on the emulator's ptys.
 
 The emulator serves from a child process, as ``khepera-noise replicate`` runs it
-(``--thread``: from a thread of this process, as before, sharing its interpreter).  Each size runs ``--episodes`` closed-loop episodes of ``--steps`` steps (the
-hand-written controller) ``--repeat`` times and prints the best: batch steps per second
-(one step of every robot) and robot-steps per second.  Figures, not assertions: timing
-depends on the machine and its load.
+(``--thread``: from a thread of this process, sharing its interpreter).  Each size runs
+``--episodes`` closed-loop episodes of ``--steps`` steps (the hand-written controller)
+``--repeat`` times and prints the best: batch steps per second (one step of every robot)
+and robot-steps per second.  Figures, not assertions: timing depends on the machine and
+its load.
 
     python benchmark/bench_reality.py --robots 12 40 [--thread]
 """

@@ -54,7 +54,7 @@ from ..core.network import GENES, check_genomes
 from ..core.task import Trace
 from . import Dropped, protocol, schedule
 from .protocol import BEARING, CMD_TURN, LIGHT
-from .workers import DONE, TOO_LARGE, Chunk, Episode, EpisodeFailed, EpisodeIds, \
+from .workers import DONE, TOO_LARGE, Chunk, Episode, EpisodeFailed, EpisodeIds, Wake, \
     Worker, discover, episode_fitness, is_pattern
 
 __all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness', 'local_graph',
@@ -90,7 +90,7 @@ class GraphEvaluator:
         self.dropped = Dropped(node)
         self.restarts = 0           # episode attempts that failed and were repeated
         self._ids = EpisodeIds()
-        self._wake = threading.Event()
+        self._wake = Wake()
         self._observed = (LIGHT, CMD_TURN, BEARING) if trace else ()
         specs = list(workers) or [robot_namespace]
         self.patterns = [s for s in specs if is_pattern(s)]
@@ -199,10 +199,12 @@ class GraphEvaluator:
 
     # --- waiting -------------------------------------------------------------------------
 
-    def _wait(self, done: Callable[[], bool], timeout_s: float | Callable[[], float]) -> bool:
+    def _wait(self, done: Callable[[], bool], timeout_s: float | Callable[[], float],
+              woken: bool = False) -> bool:
         """Wait until done(); ``timeout_s`` may be a function giving the current deadline,
         which may move later but never earlier (it is asked again only once it seems to
-        have passed: asking after every callback took about 5% of a lockstep step)."""
+        have passed: asking after every callback took about 5% of a lockstep step).
+        ``woken``: done() changes only when a callback sets ``_wake``."""
         start = time.monotonic()
         deadline = timeout_s if callable(timeout_s) else (lambda: start + timeout_s)
         end = deadline()
@@ -213,7 +215,12 @@ class GraphEvaluator:
                 left = end - time.monotonic()
             if left <= 0:
                 return False
-            if self.executor is not None:
+            if self.executor is not None and woken:
+                # the executor's own loop runs until a callback has news: not back into
+                # Python after each of a step's two callbacks
+                self.executor.spin_until_future_complete(self._wake.arm(),
+                                                         timeout_sec=min(left, 0.05))
+            elif self.executor is not None:
                 self.executor.spin_once(timeout_sec=min(left, 0.05))
             else:
                 self._wake.wait(min(left, 0.05))
@@ -314,7 +321,8 @@ class GraphEvaluator:
                     live = self._failed(worker, reason, live)
             if not news:
                 self._wait(lambda: any(w.news() for w in busy),
-                           lambda: min(w.deadline(self.stall_timeout_s) for w in busy))
+                           lambda: min(w.deadline(self.stall_timeout_s) for w in busy),
+                           woken=True)
 
     def _steal(self, thief: Worker, live: list[Worker]) -> bool:
         """Move the last queued chunk of the worker with most robots queued to ``thief``

@@ -205,11 +205,37 @@ def discover(node: Node, patterns: Iterable[str]) -> list[str]:
     return sorted(found)
 
 
+class Wake:
+    """What the callbacks set when there is news for the evaluator: an Event for a waiter
+    in another thread, and the Future of a wait that spins the executor itself."""
+
+    def __init__(self):
+        self._event = threading.Event()
+        self._future: Future | None = None
+
+    def set(self) -> None:
+        self._event.set()
+        future = self._future
+        if future is not None and not future.done():
+            future.set_result(True)
+
+    def arm(self) -> Future:
+        """A Future that the next ``set`` completes."""
+        self._future = Future()
+        return self._future
+
+    def wait(self, timeout_s: float) -> None:
+        self._event.wait(timeout_s)
+
+    def clear(self) -> None:
+        self._event.clear()
+
+
 class Worker:
     """The evaluator's end of one worker pair; ``name`` is its namespace."""
 
     def __init__(self, node: Node, namespace: str, observed: tuple[str, ...],
-                 dropped: Dropped, wake: threading.Event, controller_node: str = '',
+                 dropped: Dropped, wake: 'Wake', controller_node: str = '',
                  robot_node: str = ''):
         self.node, self.dropped, self._wake = node, dropped, wake
         ns = namespace.rstrip('/')
