@@ -430,8 +430,9 @@ def events_executor(context=None) -> Executor:
     callback, where it can run (it needs a stderr with a file descriptor for its crash
     handler), else a SingleThreadedExecutor.  Spin it from the thread that creates
     entities: here, let the evaluator spin it (``thread=False``).  Drive it with
-    ``spin_once``: in this rclpy build its ``spin()`` takes no message or service request
-    from another process."""
+    ``spin_once`` or ``spin_until_future_complete`` (``nodes.spin_forever``): in this
+    rclpy build its ``spin()`` takes no message or service request from another
+    process."""
     try:
         from rclpy.experimental.events_executor import EventsExecutor
         return EventsExecutor(context=context)

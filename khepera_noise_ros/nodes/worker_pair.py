@@ -15,8 +15,8 @@ about twice as fast as the two nodes in processes of their own (see
 the README, "Distributed evaluation"): the light -> controller -> cmd_turn round trip of every
 step stays inside the process, and the executor is rclpy's EventsExecutor,
 which costs a fraction of the SingleThreadedExecutor per callback.  It is
-driven by ``spin_once``: in this rclpy build its ``spin()`` takes no message or
-service request from another process, while ``spin_once`` does.  Discovery
+driven by ``spin_forever``: in this rclpy build its ``spin()`` takes no message
+or service request from another process.  Discovery
 stays on this machine unless ROS_AUTOMATIC_DISCOVERY_RANGE (or
 ROS_STATIC_PEERS) says otherwise.
 """
@@ -30,6 +30,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.utilities import remove_ros_args
 
+from . import spin_forever
 from .controller import Controller
 from .graph import events_executor, spinning
 
@@ -59,8 +60,7 @@ def main(args=None) -> int:
         nodes.append(Controller())
         with spinning(nodes, thread=False, executor_class=events_executor) as executor:
             nodes = []                          # spinning destroys them
-            while rclpy.ok():
-                executor.spin_once(timeout_sec=1.0)
+            spin_forever(executor)
     except (ValueError, ParameterException) as exc:
         print(f'worker_pair: error: {exc}', file=sys.stderr)
         return 2
