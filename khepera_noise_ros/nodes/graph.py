@@ -178,17 +178,18 @@ class GraphEvaluator:
 
     def wait_ready(self, timeout_s: float = 30.0) -> None:
         """Block until every named worker (and, with patterns, at least one that matches)
-        has its robot node and controller connected; TimeoutError if none has.  A named
-        worker still missing then is used once it appears (with a warning now)."""
+        has its robot node and controller connected and answering a parameter request;
+        TimeoutError if none has.  A named worker still missing then is used once it
+        appears (with a warning now)."""
         def ready() -> bool:
             self._discover()
-            ready = [w for w in self.workers.values() if w.ready()]
+            ready = [w for w in self.workers.values() if w.ready(self.stall_timeout_s)]
             return len(ready) == len(self.workers) and bool(ready or not self.patterns)
         if self._wait(ready, timeout_s):
             return
-        absent = {w.name: w.missing() or [f'the parameter services of its robot node '
-                                          f'{w.robot_node}']
-                  for w in self.workers.values() if not w.ready()}
+        absent = {w.name: w.missing() or [f'an answer from the parameter services of '
+                                          f'{w.robot_node} and {w.controller_node}']
+                  for w in self.workers.values() if not w.ready(self.stall_timeout_s)}
         if not self.workers:
             raise TimeoutError(f'after {timeout_s} s no worker matches {self.patterns}')
         if len(absent) == len(self.workers):
@@ -242,12 +243,12 @@ class GraphEvaluator:
         self._discover()
         log = self.node.get_logger()
         for worker in self.workers.values():
-            if not worker.alive and worker.answers_again(self.stall_timeout_s):
+            if not worker.alive and worker.answers(self.stall_timeout_s):
                 worker.rejoin()
                 log.warning(f'worker {worker.name} answers again: back in the pool')
         for worker in self.workers.values():
             # a worker that has joined is checked cheaply: its robot node still listens
-            joined = worker.joined and worker.listening() or worker.ready()
+            joined = worker.joined and worker.listening() or worker.ready(self.stall_timeout_s)
             if joined and not worker.joined and len(self.workers) > 1:
                 log.info(f'worker {worker.name} ({worker.robot_node}) joined')
             worker.joined = joined

@@ -301,10 +301,14 @@ class Worker:
             missing.append(f'the parameter services of {self.controller_node}')
         return missing
 
-    def ready(self) -> bool:
-        """Connected, and the robot node's parameter services are up."""
+    def ready(self, timeout_s: float = 2.0) -> bool:
+        """Connected, and both nodes have answered a parameter request: a service that
+        discovery shows may still take long over its first request (over a second, on
+        a busy machine), which would fail a first episode.  Sends the request when none
+        is pending (again after ``timeout_s``)."""
         robot = self.robot_client()
-        return not self.missing() and robot is not None and robot.services_are_ready()
+        return not self.missing() and robot is not None and robot.services_are_ready() \
+            and self.answers(timeout_s)
 
     def listening(self) -> bool:
         """Does some robot node still subscribe to episode_start (one cheap check)?"""
@@ -360,7 +364,10 @@ class Worker:
         robot = self.robot_client()
         if robot is None:
             return
-        if self._genomes_pub.get_subscription_count():
+        # the topic when the controller both takes genomes and (as this node has
+        # discovered) acknowledges them: an ack to a reader not yet matched would be lost
+        if self._genomes_pub.get_subscription_count() \
+                and self.node.count_publishers(self.topics[GENOMES_LOADED]):
             self._ack = loaded = Future()
             self._genomes_pub.publish(protocol.pack_genomes(self._id, self._genomes, raw=True))
         else:                       # a controller with the parameter only
@@ -495,9 +502,10 @@ class Worker:
         self._probe = None
         return held
 
-    def answers_again(self, timeout_s: float) -> bool:
-        """For a dropped worker: do both its nodes answer a parameter request again (it was
-        stopped and resumed, or restarted)?  Sends a request when none is pending."""
+    def answers(self, timeout_s: float) -> bool:
+        """Have both its nodes answered a parameter request since it joined or was dropped
+        (for a dropped worker: it was stopped and resumed, or restarted)?  Sends a request
+        when none is pending."""
         if self._probe is not None and all(f.done() for f in self._probe[1]):
             return True
         if self.missing() or (self._probe is not None
