@@ -56,7 +56,7 @@ class Controller(Node):
         self.dropped = Dropped(self)
         self._weights = self._load(self.get_parameter(GENOMES.name).value)
         self._tagged: dict[int, network.Weights] = {}       # episode -> its networks
-        self._running: int | None = None        # the episode of the last light answered so
+        self._running: int | None = None        # the episode of the last light answered
         self._pub = self.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
         self._pub_loaded = self.create_publisher(Int32, protocol.GENOMES_LOADED, protocol.QOS)
         self.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
