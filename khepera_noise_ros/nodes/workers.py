@@ -41,6 +41,7 @@ from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
 from ..core.khepera import SENSORS
+from ..core.network import GENES
 from ..core.task import step_fitness
 from . import Dropped, protocol
 from .schedule import Cost
@@ -235,7 +236,7 @@ class Worker:
     """The evaluator's end of one worker pair; ``name`` is its namespace."""
 
     def __init__(self, node: Node, namespace: str, observed: tuple[str, ...],
-                 dropped: Dropped, wake: 'Wake', controller_node: str = '',
+                 dropped: Dropped, wake: Wake, controller_node: str = '',
                  robot_node: str = ''):
         self.node, self.dropped, self._wake = node, dropped, wake
         ns = namespace.rstrip('/')
@@ -275,7 +276,7 @@ class Worker:
         # names either, or an episode fails (a failure may be a stale value)
         self._steps: int | None = None
         self._id = 0                            # of the episode being loaded or run
-        self._genomes = np.empty((0, 20))
+        self._genomes = np.empty((0, GENES))
         self._ack: Future | None = None         # genomes_loaded for self._id
         self._began = 0.0
         self._probe: tuple[float, list] | None = None
