@@ -98,35 +98,21 @@ def _pack(msg_type, typecode: str, dtype, header, values, label: str, raw: bool 
           cols: list | None = None, by_column: bool = False):
     """``values``: (B, columns); or None, and ``cols`` a list of the columns (B values each).
     ``by_column``: the data hold each column's B values in turn (the layout says so)."""
-    if raw:     # few calls: at the sizes of a lockstep step, calls cost more than bytes
-        if cols:
-            robots, columns = np.size(cols[0]), len(cols)
-            table = np.empty((robots, columns), dtype)
-            for k, col in enumerate(cols):
-                table[:, k] = col
-        else:
-            values = np.asarray(values)
-            robots, columns = values.shape
-            table = np.asarray(values.T if by_column else values, dtype, order='C')
-        return b''.join((_cdr_prefix(robots, columns, label, len(header), table.itemsize,
-                                     by_column),
-                         struct.pack(f'<{len(header)}{typecode}', *header), table.tobytes()))
-    values = None if cols else np.asarray(values)
-    robots, columns = (np.size(cols[0]), len(cols)) if cols else values.shape
-    body = np.empty(len(header) + robots * columns, dtype)
-    table = body[len(header):].reshape((columns, robots) if by_column else (robots, columns))
-    if by_column:
-        table = table.T
     if cols:
+        table = np.empty((np.size(cols[0]), len(cols)), dtype)
         for k, col in enumerate(cols):
             table[:, k] = col
     else:
-        table[...] = values                                         # one pass, with the cast
-    body[:len(header)] = header
+        table = np.asarray(values)
+    robots, columns = table.shape
+    # in the data's order, with the cast: one pass (none for columns packed above)
+    data = np.asarray(table.T if by_column else table, dtype, order='C').tobytes()
+    head = struct.pack(f'<{len(header)}{typecode}', *header)
+    if raw:     # few calls: at the sizes of a lockstep step, calls cost more than bytes
+        return b''.join((_cdr_prefix(robots, columns, label, len(header),
+                                     np.dtype(dtype).itemsize, by_column), head, data))
     msg = _layout(msg_type(), robots, columns, label, len(header), by_column)
-    data = array.array(typecode)
-    data.frombytes(body.tobytes())                  # one copy, no per-element loop
-    msg.data = data
+    msg.data = array.array(typecode, head + data)   # from bytes: no per-element loop
     return msg
 
 
