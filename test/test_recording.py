@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from khepera_noise_ros import recording
-from khepera_noise_ros.bag import read_bag, write_bag
+from khepera_noise_ros.recording.bag import read_bag, write_bag
 from khepera_noise_ros.core import network
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task, Trace, run

@@ -381,7 +381,7 @@ def run(args) -> int:
     csv_path, yaml_path = write_csv(rec, args.out)
     written = [csv_path, yaml_path]
     if not args.no_bag:
-        from ..bag import write_bag
+        from ..recording.bag import write_bag
         written.append(write_bag(rec, bag_path(args.out), namespace=session['namespace'],
                                  overwrite=True, start_ns=session['start_ns']))
     lost = rec.manifest.get('lost_steps', [])

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .recording import (Recording, RecordingError, check_manifest, check_sequence,
-                        dump_manifest, finish_manifest, first_bad_row)
+from .model import (Recording, RecordingError, check_manifest, check_sequence,
+                    dump_manifest, finish_manifest, first_bad_row)
 
 LIGHT, BEARING, CMD_TURN = 'light', 'bearing', 'cmd_turn'
 MANIFEST, CONDITION = 'recording/manifest', 'recording/condition'

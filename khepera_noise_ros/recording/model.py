@@ -1,18 +1,9 @@
-"""Recordings in the public format (DESIGN.md): CSV plus YAML manifest, and rosbag2 (MCAP).
+"""The recording in memory (``Recording``), its manifest and the checks both file formats share."""
 
-The in-memory form is ``Recording``: one row per sample.  A Khepera file has
-exactly the version-1 columns; a board with C != 8 light channels extends
-them with s8, s9, ... and says so in the manifest (``channels``), which also
-marks the channels that carry data (``channels_used``).  Readers are strict:
-every problem is reported with the file, the line and what is wrong, because a
-silently mangled recording would poison the synchrony and gap analyses.
-"""
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import yaml
@@ -225,6 +216,21 @@ def _pairs(pairs: list[tuple[int, int]], limit: int = 5) -> str:
     return text + (f' and {len(pairs) - limit} more' if len(pairs) > limit else '')
 
 
+def dump_manifest(manifest: dict) -> str:
+    return yaml.safe_dump(_plain(manifest), sort_keys=False, default_flow_style=None)
+
+
+def _plain(value):
+    """numpy scalars and tuples to YAML-safe Python values."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 # -- rows -------------------------------------------------------------------------------
 
 def first_bad_row(rec: Recording) -> tuple[int, str] | None:
@@ -265,149 +271,6 @@ def _bad_reading(rec: Recording, i: int, low: float, high: float) -> str:
     return 'bad reading'
 
 
-# -- CSV ----------------------------------------------------------------------------------
-
-def paths(path) -> tuple[Path, Path]:
-    """(NAME.csv, NAME.yaml) for NAME, NAME.csv or NAME.yaml."""
-    path = Path(path)
-    stem = path.with_suffix('') if path.suffix in ('.csv', '.yaml') else path
-    return stem.with_name(stem.name + '.csv'), stem.with_name(stem.name + '.yaml')
-
-
-def write_csv(rec: Recording, path) -> tuple[Path, Path]:
-    """Write NAME.csv and NAME.yaml; returns their paths."""
-    rec.check()
-    csv_path, yaml_path = paths(path)
-    manifest = finish_manifest(rec)
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, 'w', newline='') as f:
-        writer = csv.writer(f, lineterminator='\n')
-        writer.writerow(columns(rec.channels))
-        for i in range(len(rec)):
-            writer.writerow([int(rec.episode[i]), int(rec.step[i]), _cell(rec.heading_deg[i]),
-                             str(rec.condition[i])] + [_cell(v) for v in rec.readings[i]]
-                            + [_cell(rec.direction[i]), _cell(rec.power[i])])
-    yaml_path.write_text(dump_manifest(manifest))
-    return csv_path, yaml_path
-
-
-def dump_manifest(manifest: dict) -> str:
-    return yaml.safe_dump(_plain(manifest), sort_keys=False, default_flow_style=None)
-
-
-def _plain(value):
-    """numpy scalars and tuples to YAML-safe Python values."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def _cell(value) -> str:
-    """A number as the shortest text that reads back exactly; empty for NaN."""
-    value = float(value)
-    if math.isnan(value):
-        return ''
-    if value.is_integer() and abs(value) < 1e15:
-        return str(int(value))
-    return repr(value)
-
-
-def read_manifest(path) -> dict:
-    """The YAML manifest, or a RecordingError with the file and line."""
-    path = Path(path)
-    try:
-        manifest = yaml.safe_load(path.read_text())
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark
-        line = f' line {mark.line + 1}' if mark is not None else ''
-        raise RecordingError(f'{path}{line}: not valid YAML: {exc.problem}') from None
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise RecordingError(f'{path}: not valid YAML: {exc}') from None
-    return manifest
-
-
-def read_csv(path) -> Recording:
-    """Read NAME.csv with NAME.yaml (NAME, NAME.csv or NAME.yaml may be given)."""
-    csv_path, yaml_path = paths(path)
-    for p in (csv_path, yaml_path):
-        if not p.is_file():
-            raise FileNotFoundError(f'{p}: no such file (a recording is NAME.csv plus '
-                                    f'NAME.yaml)')
-    manifest = read_manifest(yaml_path)
-    try:
-        with open(csv_path, newline='') as f:
-            reader = csv.reader(f, strict=True)
-            channels = _read_header(csv_path, next(reader, None))
-            try:
-                check_manifest(manifest, channels)
-            except ValueError as exc:
-                raise RecordingError(f'{yaml_path}: {exc}') from None
-            lines, rows = [], []
-            for row in reader:
-                lines.append(reader.line_num)
-                rows.append(_parse_row(f'{csv_path} line {reader.line_num}', row, channels))
-    except UnicodeDecodeError as exc:
-        raise RecordingError(f'{csv_path}: not a text file ({exc.reason})') from None
-    except csv.Error as exc:
-        raise RecordingError(f'{csv_path} line {reader.line_num}: {exc}') from None
-    rec = _assemble(rows, channels, manifest)
-    where = (lambda i: f'{csv_path} line {lines[i]}')
-    bad = first_bad_row(rec)
-    if bad:
-        raise RecordingError(f'{where(bad[0])}: {bad[1]}')
-    check_sequence(rec, where, str(csv_path), yaml_path.name)
-    return rec
-
-
-def _read_header(path: Path, header: list[str] | None) -> int:
-    """The number of light channels the header declares."""
-    if header is None:
-        raise RecordingError(f'{path}: empty file, expected the header {",".join(COLUMNS)}')
-    channels = len(header) - len(COLUMNS) + KHEPERA_CHANNELS
-    if channels < 1 or tuple(header) != columns(channels):
-        raise RecordingError(f'{path} line 1: header must be {",".join(COLUMNS)} (with s8, '
-                             f's9, ... for more channels), got {",".join(header)}')
-    return channels
-
-
-def _parse_row(where: str, row: list[str], channels: int) -> tuple:
-    names = columns(channels)
-    if len(row) != len(names):
-        raise RecordingError(f'{where}: expected {len(names)} columns, got {len(row)}')
-    try:
-        return tuple(_number(n, t, integer=n in ('episode', 'step')) if n != 'condition' else t
-                     for n, t in zip(names, row))
-    except ValueError as exc:
-        raise RecordingError(f'{where}: {exc}') from None
-
-
-def _number(name: str, text: str, integer: bool = False) -> float:
-    if text == '':
-        if integer:
-            raise ValueError(f'{name} is empty')
-        return math.nan
-    try:
-        value = float(text)
-    except ValueError:
-        raise ValueError(f'{name} is not a number: {text!r}') from None
-    if integer and not value.is_integer():
-        raise ValueError(f'{name} must be an integer, got {text!r}')
-    return value
-
-
-def _assemble(rows: list[tuple], channels: int, manifest: dict) -> Recording:
-    table = np.array([r[:3] + r[4:] for r in rows], np.float64).reshape(len(rows), channels + 5)
-    return Recording(
-        episode=table[:, 0].astype(np.int64), step=table[:, 1].astype(np.int64),
-        heading_deg=table[:, 2], condition=np.array([r[3] for r in rows], dtype=str),
-        readings=table[:, 3:3 + channels].copy(), direction=table[:, -2].copy(),
-        power=table[:, -1].copy(), manifest=manifest)
-
-
 def check_sequence(rec: Recording, where, name: str, manifest_name) -> None:
     """Every (episode, step) once, in order within its episode, as the manifest declares.
 
@@ -434,20 +297,3 @@ def check_sequence(rec: Recording, where, name: str, manifest_name) -> None:
         if missing:
             raise RecordingError(f'{name}: steps missing that {manifest_name} does not list '
                                  f'as lost: {_pairs(missing)}')
-
-
-# -- either format ------------------------------------------------------------------------
-
-def load(path) -> Recording:
-    """Read a recording: a rosbag2 directory, or NAME / NAME.csv / NAME.yaml."""
-    path = Path(path)
-    if path.is_dir():
-        from .bag import read_bag
-        return read_bag(path)
-    return read_csv(path)
-
-
-def bag_path(path) -> Path:
-    """Where the rosbag2 twin of recording NAME goes: NAME_bag/."""
-    stem = paths(path)[0].with_suffix('')
-    return stem.with_name(stem.name + '_bag')
