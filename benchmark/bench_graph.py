@@ -45,8 +45,9 @@ from rclpy.node import Node  # noqa: E402
 
 from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
-from khepera_noise_ros.nodes.graph import GraphEvaluator, events_executor, \
-    local_graph  # noqa: E402
+from khepera_noise_ros.nodes.graph import GraphEvaluator  # noqa: E402
+from khepera_noise_ros.nodes.local_graph import local_graph  # noqa: E402
+from khepera_noise_ros.nodes.runtime import events_executor  # noqa: E402
 
 
 def cpu_seconds(pids: list[int]) -> list[float]:

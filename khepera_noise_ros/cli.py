@@ -14,10 +14,7 @@ import pkgutil
 import sys
 
 from . import __version__, commands
-
-
-class UsageError(Exception):
-    """A mistake in the command line or its inputs, reported without a traceback."""
+from .commands._options import UsageError
 
 
 def loopback_only() -> None:

@@ -17,7 +17,8 @@ from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes.checkpoint import FORMAT
 from khepera_noise_ros.nodes.controller import Controller
-from khepera_noise_ros.nodes.graph import events_executor, local_graph, spinning
+from khepera_noise_ros.nodes.local_graph import local_graph
+from khepera_noise_ros.nodes.runtime import events_executor, spinning
 from nodes_fixtures import controller, simulator, wait_for
 
 STEPS = 15

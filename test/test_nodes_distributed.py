@@ -19,7 +19,8 @@ from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes import protocol, schedule, worker_pair
 from khepera_noise_ros.nodes.evolution_manager import MANAGER_SPECS, EvolutionManager
-from khepera_noise_ros.nodes.graph import GraphEvaluator, events_executor, spinning
+from khepera_noise_ros.nodes.graph import GraphEvaluator
+from khepera_noise_ros.nodes.runtime import events_executor, spinning
 from khepera_noise_ros.nodes.params import Spec, overrides
 from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.nodes.workers import discover

@@ -13,7 +13,9 @@ from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.controller import Controller
-from khepera_noise_ros.nodes.graph import EpisodeFailed, local_graph, spinning
+from khepera_noise_ros.nodes.graph import EpisodeFailed
+from khepera_noise_ros.nodes.local_graph import local_graph
+from khepera_noise_ros.nodes.runtime import spinning
 from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.nodes.protocol import CMD_TURN
 from khepera_noise_ros.nodes.simulator import Simulator

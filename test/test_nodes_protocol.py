@@ -7,7 +7,8 @@ from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
-from khepera_noise_ros.nodes import Dropped, protocol
+from khepera_noise_ros.nodes import protocol
+from khepera_noise_ros.nodes.dropped import Dropped
 from khepera_noise_ros.nodes.graph import EpisodeIds, episode_fitness
 from khepera_noise_ros.core.task import step_fitness
 

@@ -14,7 +14,7 @@ from khepera_noise_ros.gap import effects as fx, simconfig
 from khepera_noise_ros.gap.simulate import EffectEpisodes
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.evolution_manager import EvolutionManager
-from khepera_noise_ros.nodes.graph import spinning
+from khepera_noise_ros.nodes.runtime import spinning
 from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, \
     LIGHT

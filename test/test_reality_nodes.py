@@ -10,7 +10,8 @@ from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes.controller import GENOMES, Controller
 from khepera_noise_ros.nodes.evolution_manager import MANAGER_SPECS, EvolutionManager
-from khepera_noise_ros.nodes.graph import EpisodeFailed, episode_fitness, spinning
+from khepera_noise_ros.nodes.graph import EpisodeFailed, episode_fitness
+from khepera_noise_ros.nodes.runtime import spinning
 from khepera_noise_ros.nodes.hardware_bridge import HardwareBridge
 from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.reality.emulator import Emulator

@@ -1,4 +1,4 @@
-"""Command-line options shared by several commands: the noise model and the world."""
+"""What the commands share: UsageError, and the options for the noise model and the world."""
 from __future__ import annotations
 
 import argparse
@@ -6,6 +6,10 @@ import argparse
 from ..core.khepera import World
 from ..core.noise import DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, NoiseModel, format_groups, \
     parse_groups
+
+
+class UsageError(Exception):
+    """A mistake in the command line or its inputs, reported without a traceback."""
 
 
 def add_noise_arguments(parser: argparse.ArgumentParser, model: str = 'combination',

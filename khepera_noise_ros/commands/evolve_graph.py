@@ -14,7 +14,7 @@ from pathlib import Path
 import sys
 import time
 
-from ..cli import UsageError
+from ._options import UsageError
 
 NAME = 'graph-evolve'
 HELP = 'evolve through simulator, controller and evolution_manager nodes in one process'
@@ -44,7 +44,9 @@ def run(args) -> int:
     import rclpy
     from rclpy.context import Context
 
-    from ..nodes.graph import EpisodeFailed, events_executor, local_graph
+    from ..nodes.graph import EpisodeFailed
+    from ..nodes.local_graph import local_graph
+    from ..nodes.runtime import events_executor
 
     if args.params_file is not None and not args.params_file.is_file():
         raise FileNotFoundError(f'parameter file {args.params_file} not found')

@@ -77,7 +77,8 @@ class Recorder:
     def __init__(self, node, timeout_s: float = 5.0, pace_s: float = 0.0):
         from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
-        from ..nodes import Dropped, protocol
+        from ..nodes import protocol
+        from ..nodes.dropped import Dropped
         self.node, self.protocol = node, protocol
         self.timeout_s, self.pace_s = timeout_s, pace_s
         self.dropped = Dropped(node)
@@ -364,7 +365,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from ..cli import UsageError
+    from ._options import UsageError
     if args.attach and not args.source:
         raise UsageError('--attach needs --source (simulator, emulator or hardware)')
     if args.protocol == 'closed-loop' and args.genome is None:

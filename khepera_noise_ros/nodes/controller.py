@@ -24,7 +24,9 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
 from ..core import network
-from . import Dropped, protocol, spin_node
+from . import protocol
+from .dropped import Dropped
+from .runtime import spin_node
 from .params import Spec, declare, proposed
 
 GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: one network per '

@@ -35,7 +35,7 @@ from ..core.evolution import BEST_MODES, FITNESS_MODES, PHASE1, PHASE2, EAConfig
     SteadyStateEA, evolve
 from ..core.network import GENES, check_genomes
 from ..files import write_json
-from . import spin_node
+from .runtime import spin_node
 from .checkpoint import Checkpoint, checkpoint_path
 from .graph import GraphEvaluator
 from .params import SEED_MAX, Spec, check_choice, current, declare, proposed

@@ -39,26 +39,23 @@ event the callbacks set; when given ``executor``, by spinning it itself.
 """
 from __future__ import annotations
 
-from contextlib import contextmanager
-from dataclasses import dataclass
-import threading
 import time
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from rcl_interfaces.msg import ParameterType, ParameterValue
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor
 from rclpy.node import Node
 
 from ..core.network import GENES, check_genomes
 from ..core.task import Trace
-from . import Dropped, protocol, schedule
+from . import protocol, schedule
+from .dropped import Dropped
 from .protocol import BEARING, CMD_TURN, LIGHT
 from .workers import DONE, TOO_LARGE, Chunk, Episode, EpisodeFailed, EpisodeIds, Wake, \
     Worker, discover, episode_fitness, is_pattern
 
-__all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness', 'local_graph',
-           'spinning', 'events_executor']
+__all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness']
 
 
 class GraphEvaluator:
@@ -401,98 +398,3 @@ def _python(value: ParameterValue):
         return None
     v = getattr(value, field)
     return v if isinstance(v, (bool, int, float, str)) else list(v)
-
-
-# --- running nodes in one process ----------------------------------------------------------
-
-@contextmanager
-def spinning(nodes: list[Node], context=None, thread: bool = True,
-             executor_class=SingleThreadedExecutor) -> Iterator[Executor]:
-    """All nodes on one executor, spun in a background thread unless ``thread`` is False;
-    on exit the executor stops and the nodes are destroyed, whatever happened."""
-    executor = executor_class(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    worker = threading.Thread(target=_spin, args=(executor,), daemon=True) if thread else None
-    if worker is not None:
-        worker.start()
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        if worker is not None:
-            worker.join(timeout=10)
-        for node in nodes:
-            node.destroy_node()
-
-
-def events_executor(context=None) -> Executor:
-    """rclpy's EventsExecutor, with a fraction of the Python executor's overhead per
-    callback, where it can run (it needs a stderr with a file descriptor for its crash
-    handler), else a SingleThreadedExecutor.  Spin it from the thread that creates
-    entities: here, let the evaluator spin it (``thread=False``).  Drive it with
-    ``spin_once`` or ``spin_until_future_complete`` (``nodes.spin_forever``): in this
-    rclpy build its ``spin()`` takes no message or service request from another
-    process."""
-    try:
-        from rclpy.experimental.events_executor import EventsExecutor
-        return EventsExecutor(context=context)
-    except (ImportError, ValueError, OSError):
-        return SingleThreadedExecutor(context=context)
-
-
-def _spin(executor: Executor) -> None:
-    try:
-        executor.spin()
-    except ExternalShutdownException:
-        pass
-
-
-@dataclass
-class LocalGraph:
-    """simulator + controller + evolution_manager in one process, on one executor."""
-
-    robot: Node
-    controller: Node
-    manager: Node
-    executor: Executor
-
-    @property
-    def evaluator(self) -> GraphEvaluator:
-        return self.manager.evaluator
-
-
-@contextmanager
-def local_graph(context=None, simulator: dict | None = None, controller: dict | None = None,
-                manager: dict | None = None, cli_args: list[str] | None = None,
-                namespace: str = '', thread: bool = True,
-                executor_class=SingleThreadedExecutor,
-                trace: bool = True) -> Iterator[LocalGraph]:
-    """Build the three nodes with these parameter dicts (and ``--ros-args`` cli_args such as
-    a params file), and spin them: in a background thread, or (``thread=False``) by the
-    evaluator itself whenever it waits.  ``trace``: the manager observes every step, so
-    that ``evaluator.trace()`` works."""
-    from .controller import GENOMES, Controller
-    from .evolution_manager import MANAGER_SPECS, EvolutionManager
-    from .params import overrides
-    from .simulator import Simulator
-
-    common = dict(context=context, cli_args=cli_args, namespace=namespace)
-    nodes: list[Node] = []
-    try:
-        sim = Simulator(parameter_overrides=overrides(Simulator.parameter_specs(), simulator),
-                        **common)
-        nodes.append(sim)
-        ctrl = Controller(parameter_overrides=overrides([GENOMES], controller), **common)
-        nodes.append(ctrl)
-        mgr = EvolutionManager(parameter_overrides=overrides(MANAGER_SPECS, manager),
-                               trace=trace, **common)
-        nodes.append(mgr)
-    except BaseException:
-        for node in nodes:
-            node.destroy_node()
-        raise
-    with spinning(nodes, context, thread, executor_class) as executor:
-        if not thread:
-            mgr.evaluator.executor = executor
-        yield LocalGraph(sim, ctrl, mgr, executor)

@@ -18,7 +18,7 @@ from rclpy.parameter import Parameter
 
 from ..reality.khepera_robot import TURN_MODES, KheperaRobots, SerialRobots
 from ..reality.serial_protocol import SPEED_MAX, Wheels
-from . import spin_node
+from .runtime import spin_node
 from .params import GEOMETRY, SEED_MAX, Spec, check_choice, task_from, world_from
 from .robot_node import RobotNode
 from .simulator import SIMULATOR_SPECS

@@ -45,7 +45,8 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray
 
 from ..core.khepera import DARK, SENSORS
 from ..core.task import Task, step_fitness
-from . import Dropped, protocol
+from . import protocol
+from .dropped import Dropped
 from .params import (GEOMETRY_SPECS, TASK_SPECS, Spec, check_choice, current, declare,
                      proposed, task_from, world_from)
 

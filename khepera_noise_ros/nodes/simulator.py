@@ -20,7 +20,7 @@ from ..core.noise import DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, NoiseModel, form
 from ..core.task import Task
 from ..gap import effects as fx
 from ..gap.simulate import EffectEpisodes
-from . import spin_node
+from .runtime import spin_node
 from .params import GEOMETRY, SEED_MAX, Spec, noise_from, task_from, world_from
 from .robot_node import RobotNode
 

@@ -30,9 +30,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.utilities import remove_ros_args
 
-from . import spin_forever
 from .controller import Controller
-from .graph import events_executor, spinning
+from .runtime import events_executor, spin_forever, spinning
 
 USAGE = 'usage: worker_pair [--bridge] [--ros-args ...]'
 

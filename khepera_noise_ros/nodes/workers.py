@@ -43,7 +43,8 @@ from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 from ..core.khepera import SENSORS
 from ..core.network import GENES
 from ..core.task import step_fitness
-from . import Dropped, protocol
+from . import protocol
+from .dropped import Dropped
 from .schedule import Cost
 from .protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, GENOMES, GENOMES_LOADED, \
     LIGHT
