@@ -23,7 +23,8 @@ from khepera_noise_ros.nodes.graph import GraphEvaluator
 from khepera_noise_ros.nodes.runtime import events_executor, spinning
 from khepera_noise_ros.nodes.params import Spec, overrides
 from khepera_noise_ros.nodes.simulator import Simulator
-from khepera_noise_ros.nodes.workers import discover
+from khepera_noise_ros.nodes.discovery import discover
+from khepera_noise_ros.nodes.workers import WorkerState
 from nodes_fixtures import controller, manager, simulator, wait_for
 
 STEPS = 15
@@ -218,7 +219,7 @@ def test_worker_processes_join_late_and_a_killed_one_hands_its_work_on(ros_conte
         before, deadline = victim.robots, time.monotonic() + 60
         while victim.robots == before and time.monotonic() < deadline:
             np.testing.assert_array_equal(evaluator(GENOMES, SEEDS), CORE(GENOMES, SEEDS))
-        assert victim.robots > before and victim.alive
+        assert victim.robots > before and victim.state is not WorkerState.LOST
     eas = core_evolution(evolution.EAConfig(population=6, generations=4), 6, 2)
     assert_same_evolution(record, eas)
     dropped = {w['namespace']: w['dropped'] for w in record['workers']}

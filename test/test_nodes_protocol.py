@@ -3,6 +3,8 @@ import array
 
 import numpy as np
 import pytest
+from rclpy.logging import LoggingSeverity
+from rclpy.node import Node
 from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray, Int32MultiArray
@@ -173,34 +175,21 @@ def test_episode_fitness_sums_like_the_core():
     np.testing.assert_array_equal(episode_fitness(readings, power), total / 30)
 
 
-class _Logger:
-    def __init__(self):
-        self.lines = []
-
-    def warning(self, message):
-        self.lines.append(('warning', message))
-
-    def debug(self, message):
-        self.lines.append(('debug', message))
-
-
-class _Node:
-    def __init__(self):
-        self.logger = _Logger()
-
-    def get_logger(self):
-        return self.logger
-
-
-def test_drops_are_counted_and_warned_at_most_once_a_second_per_kind():
-    node = _Node()
-    dropped = Dropped(node)
-    for _ in range(3):
-        dropped.add('malformed', 'NaN reading')
-    dropped.add('wrong_robots', '3 robots, genomes hold 2')
-    dropped.add('stale', 'a duplicate', warn=False)
-    assert dict(dropped) == {'malformed': 3, 'wrong_robots': 1, 'stale': 1}
-    warnings = [m for level, m in node.logger.lines if level == 'warning']
+def test_drops_are_counted_and_warned_at_most_once_a_second_per_kind(ros_context, capfd):
+    node = Node('dropper', context=ros_context)
+    try:
+        node.get_logger().set_level(LoggingSeverity.DEBUG)
+        dropped = Dropped(node)
+        for _ in range(3):
+            dropped.add('malformed', 'NaN reading')
+        dropped.add('wrong_robots', '3 robots, genomes hold 2')
+        dropped.add('stale', 'a duplicate', warn=False)
+        assert dict(dropped) == {'malformed': 3, 'wrong_robots': 1, 'stale': 1}
+    finally:
+        node.destroy_node()
+    lines = [line for line in capfd.readouterr().err.splitlines() if 'dropped a message' in line]
+    warnings = [line.split(']: ', 1)[1] for line in lines if line.startswith('[WARN]')]
     assert warnings == ['dropped a message (malformed, 1 so far): NaN reading',
                         'dropped a message (wrong_robots, 1 so far): 3 robots, genomes hold 2']
-    assert len(node.logger.lines) == 5                  # the rest at debug level
+    assert len(lines) == 5 and all(line.startswith('[DEBUG]') for line in lines
+                                   if not line.startswith('[WARN]'))

@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 from collections import Counter
-import time
 from typing import Callable
 
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.logging import get_logger
 from rclpy.node import Node
 
 from .protocol import Malformed
@@ -17,17 +18,16 @@ class Dropped(Counter):
     def __init__(self, node: Node):
         super().__init__()
         self._logger = node.get_logger()
-        self._warned: dict[str, float] = {}
+        # rclpy throttles per logger object and call site: one logger per kind
+        self._warners: dict[str, RcutilsLogger] = {}
 
     def add(self, kind: str, reason: str, warn: bool = True) -> bool:
         """Count and log one dropped message; returns False so a check can return it."""
         self[kind] += 1
         message = f'dropped a message ({kind}, {self[kind]} so far): {reason}'
-        now = time.monotonic()
-        if warn and now - self._warned.get(kind, -1.0) >= 1.0:
-            self._warned[kind] = now
-            self._logger.warning(message)
-        else:
+        warner = self._warners.get(kind) or self._warners.setdefault(
+            kind, get_logger(self._logger.name))
+        if not (warn and warner.warning(message, throttle_duration_sec=1.0)):
             self._logger.debug(message)
         return False
 

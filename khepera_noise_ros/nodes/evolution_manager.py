@@ -39,7 +39,7 @@ from .runtime import spin_node
 from .checkpoint import Checkpoint, checkpoint_path
 from .graph import GraphEvaluator
 from .params import SEED_MAX, Spec, check_choice, current, declare, proposed
-from .workers import is_pattern
+from .discovery import is_pattern
 
 FORMAT = 'khepera-noise-evolution/1'
 BEST_FITNESS = 'best_fitness'

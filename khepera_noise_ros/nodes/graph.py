@@ -43,17 +43,19 @@ import time
 from typing import Callable, Sequence
 
 import numpy as np
-from rcl_interfaces.msg import ParameterType, ParameterValue
 from rclpy.executors import Executor
 from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
 
 from ..core.network import GENES, check_genomes
 from ..core.task import Trace
 from . import protocol, schedule
 from .dropped import Dropped
 from .protocol import BEARING, CMD_TURN, LIGHT
-from .workers import DONE, TOO_LARGE, Chunk, Episode, EpisodeFailed, EpisodeIds, Wake, \
-    Worker, discover, episode_fitness, is_pattern
+from .discovery import discover, is_pattern
+from .episode import Chunk, Episode, EpisodeFailed, EpisodeIds, episode_fitness
+from .wake import Wake
+from .workers import DONE, TOO_LARGE, Worker, WorkerState
 
 __all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness']
 
@@ -171,7 +173,7 @@ class GraphEvaluator:
         values_f = robot.get_parameters(names)
         if not self._wait(values_f.done, timeout_s):
             raise TimeoutError(f'no answer from {worker.robot_node}/get_parameters')
-        return {n: _python(v) for n, v in zip(names, values_f.result().values)}
+        return {n: parameter_value_to_python(v) for n, v in zip(names, values_f.result().values)}
 
     def wait_ready(self, timeout_s: float = 30.0) -> None:
         """Block until every named worker (and, with patterns, at least one that matches)
@@ -240,19 +242,17 @@ class GraphEvaluator:
         self._discover()
         log = self.node.get_logger()
         for worker in self.workers.values():
-            if not worker.alive and worker.answers(self.stall_timeout_s):
+            if worker.state is WorkerState.LOST and worker.answers(self.stall_timeout_s):
                 worker.rejoin()
                 log.warning(f'worker {worker.name} answers again: back in the pool')
         for worker in self.workers.values():
-            # a worker that has joined is checked cheaply: its robot node still listens
-            joined = worker.joined and worker.listening() or worker.ready(self.stall_timeout_s)
-            if joined and not worker.joined and len(self.workers) > 1:
+            if worker.check_joined(self.stall_timeout_s) and len(self.workers) > 1:
                 log.info(f'worker {worker.name} ({worker.robot_node}) joined')
-            worker.joined = joined
-        live = [w for w in self.workers.values() if w.alive and w.joined]
+        live = [w for w in self.workers.values() if w.state is WorkerState.READY]
         if live:
             return live
-        alive = [w for w in self.workers.values() if w.alive]   # none ready: try them anyway
+        # none ready: try the ones still joining anyway
+        alive = [w for w in self.workers.values() if w.state is WorkerState.JOINING]
         if not alive:
             raise EpisodeFailed(f'no worker matches {self.patterns}: no node publishes '
                                 f'<namespace>/{LIGHT} in a matching namespace')
@@ -382,19 +382,3 @@ def _batch(genomes, seeds) -> tuple[np.ndarray, np.ndarray]:
     if bad.any():
         raise ValueError(f'episode seeds must be integers in [0, 2**53), got {seeds[bad][0]}')
     return genomes, seeds
-
-
-def _python(value: ParameterValue):
-    """A ParameterValue message as a plain Python value (for JSON)."""
-    field = {ParameterType.PARAMETER_BOOL: 'bool_value',
-             ParameterType.PARAMETER_INTEGER: 'integer_value',
-             ParameterType.PARAMETER_DOUBLE: 'double_value',
-             ParameterType.PARAMETER_STRING: 'string_value',
-             ParameterType.PARAMETER_BOOL_ARRAY: 'bool_array_value',
-             ParameterType.PARAMETER_INTEGER_ARRAY: 'integer_array_value',
-             ParameterType.PARAMETER_DOUBLE_ARRAY: 'double_array_value',
-             ParameterType.PARAMETER_STRING_ARRAY: 'string_array_value'}.get(value.type)
-    if field is None:
-        return None
-    v = getattr(value, field)
-    return v if isinstance(v, (bool, int, float, str)) else list(v)

@@ -1,35 +1,16 @@
 """One worker pair as the evaluator sees it: a robot node and a controller in a namespace.
 
-A ``Worker`` runs at most one episode at a time, without blocking: ``begin``
-loads a chunk's genomes into the controller (on its ``genomes`` topic, tagged
-with the episode id, and waits for ``genomes_loaded``; through the
-``genomes`` parameter for a controller that has no such topic) and reads the
-robot node's ``steps`` (and ``ports``, the robots a hardware bridge has) when
-it has not yet, or they may have changed: a ``/parameter_events`` message of
-the robot node naming either, or a failed episode, has it read them again;
-``poll`` then publishes ``episode_start`` and reports the episode done,
-failed (stalled, or broke the protocol) or too large for the robot node.
-The episode is done when the robot node's ``fitness`` message for it arrives:
-one message per episode, so that a manager on another machine is not flooded
-with two per step.  When the evaluator traces, the worker also observes
-light, cmd_turn and bearing at every step, and checks that the fitness the
-robot node reports is the one those messages give.  Messages tagged with
-another episode id are ignored, so a late answer from an earlier attempt can
-never be paired with the current one.
-
-``discover`` finds worker namespaces in the ROS graph: wherever some node
-publishes ``<ns>/light`` and some node subscribes to ``<ns>/episode_start``.
+A ``Worker`` runs at most one episode at a time without blocking (``begin``, then ``poll``
+until it reports the episode done, failed or too large) and keeps its place in the pool
+as a ``WorkerState``.
 """
 from __future__ import annotations
 
 import array
 from collections import deque
-from dataclasses import dataclass
-from fnmatch import fnmatchcase
-import secrets
-import threading
+import enum
 import time
-from typing import Callable, Iterable
+from typing import Callable
 
 import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterEvent, ParameterType, \
@@ -40,197 +21,29 @@ from rclpy.qos import qos_profile_parameter_events
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
-from ..core.khepera import SENSORS
 from ..core.network import GENES
-from ..core.task import step_fitness
 from . import protocol
+from .discovery import in_namespace
 from .dropped import Dropped
-from .schedule import Cost
+from .episode import Chunk, Episode, EpisodeFailed, EpisodeIds
 from .protocol import BEARING, CMD_TURN, EPISODE_START, FITNESS, GENOMES, GENOMES_LOADED, \
     LIGHT
+from .schedule import Cost
+from .wake import Wake
 
-LIGHT_TYPE = 'std_msgs/msg/Float64MultiArray'
 FIRST_STEP_S = 0.05     # time allowed per step before a worker is measured (serial Khepera)
-
-
-class EpisodeFailed(RuntimeError):
-    """An episode could not be completed through the graph."""
-
-
-def episode_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Mean step fitness, summed in float32 step by step exactly as core.task.run does.
-
-    readings: (steps, B, 8) float32; power: (steps, B).
-    """
-    total = np.zeros(readings.shape[1], np.float32)
-    for step_readings, step_power in zip(readings, power):
-        total += step_fitness(step_readings.T, step_power)
-    return (total / len(readings)).astype(np.float64)
-
-
-class EpisodeIds:
-    """Episode ids that count up from a random start, so that two managers sharing a
-    robot node almost surely use different ids."""
-
-    def __init__(self):
-        self._next = secrets.randbelow(protocol.MAX_EPISODE)
-
-    def __next__(self) -> int:
-        self._next = (self._next + 1) % protocol.MAX_EPISODE
-        return self._next
-
-
-class Episode:
-    """What the evaluator has observed of one episode; filled by the subscription callbacks.
-
-    ``topics``: the per-step topics observed (none unless tracing).  Each one's values go
-    straight into a preallocated (steps, B, columns) array, in the dtype the core computes
-    with (readings float32), so that nothing is stacked at the end.
-    """
-
-    LAYOUT = {LIGHT: (SENSORS, np.float32), CMD_TURN: (2, np.int32), BEARING: (1, np.float64)}
-
-    def __init__(self, episode: int, robots: int, steps: int, topics: tuple[str, ...]):
-        self.episode, self.robots, self.steps = episode, robots, steps
-        self.values = {t: np.empty((steps, robots, self.LAYOUT[t][0]), self.LAYOUT[t][1])
-                       for t in topics}
-        self.seen = {t: np.zeros(steps, bool) for t in topics}
-        self.score: np.ndarray | None = None       # the robot node's fitness, (B,)
-        self.error: str | None = None
-        self.complete = False
-        self.progress = time.monotonic()
-        self._count = 0
-
-    @property
-    def finished(self) -> bool:
-        return self.complete or self.error is not None
-
-    @property
-    def next_step(self) -> int:
-        """The first step some observed message is still missing for."""
-        return min((int(np.argmin(seen)) if not seen.all() else self.steps
-                    for seen in self.seen.values()), default=0)
-
-    def fitness(self) -> np.ndarray:
-        return self.score
-
-    def add_fitness(self, steps: int, values: np.ndarray) -> None:
-        if self.finished:
-            return
-        score = values[:, 0]
-        if steps != self.steps:
-            self.error = (f'fitness after {steps} steps, but the robot node has steps = '
-                          f'{self.steps} (was it changed during the episode?)')
-        elif score.shape[0] != self.robots:
-            self.error = (f'fitness for episode {self.episode} has {score.shape[0]} robots, '
-                          f'the episode has {self.robots}')
-        elif self.score is None:
-            self.score = score.copy()
-            self.progress = time.monotonic()
-            self._check_complete()
-        elif not np.array_equal(self.score, score):
-            self.error = (f'two different fitness messages for episode {self.episode}: two '
-                          'robot nodes in one namespace?')
-
-    def _check_complete(self) -> None:
-        """Complete once the fitness and every observed step are in; then the fitness
-        must be the one the observed readings and commands give."""
-        if self.score is None or self._count < len(self.values) * self.steps:
-            return
-        if LIGHT in self.values and CMD_TURN in self.values:
-            observed = episode_fitness(self.values[LIGHT], self.values[CMD_TURN][..., 1])
-            if not np.array_equal(observed, self.score):
-                robot = int(np.flatnonzero(observed != self.score)[0])
-                self.error = (f'the robot node reports fitness {self.score[robot]} for robot '
-                              f'{robot} of episode {self.episode}, its light and cmd_turn '
-                              f'messages give {observed[robot]}')
-                return
-        self.complete = True
-
-    def add(self, topic: str, step: int, values: np.ndarray) -> None:
-        if self.finished or (topic == BEARING and step == self.steps):   # final heading
-            return
-        if values.shape[0] != self.robots:
-            self.error = (f'{topic} ({self.episode}, {step}) has {values.shape[0]} robots, '
-                          f'the episode has {self.robots}')
-        elif step >= self.steps:
-            self.error = (f'{topic} for step {step}, but the robot node has steps = '
-                          f'{self.steps} (was it changed during the episode?)')
-        elif not self.seen[topic][step]:
-            self.values[topic][step] = values
-            self.seen[topic][step] = True
-            self.progress = time.monotonic()
-            self._count += 1
-            self._check_complete()
-        elif not np.array_equal(self.values[topic][step],
-                                values.astype(self.values[topic].dtype)):
-            self.error = (f'two different {topic} messages for ({self.episode}, {step}): '
-                          'a node answered twice with different data')
-
-
-@dataclass
-class Chunk:
-    """Robots [lo, hi) of a batch, and how many times an episode of them failed."""
-
-    lo: int
-    hi: int
-    attempts: int = 0
-
-    @property
-    def robots(self) -> int:
-        return self.hi - self.lo
 
 
 # poll() outcomes
 DONE, FAILED, TOO_LARGE = 'done', 'failed', 'too large'
 
 
-def _in(ns: str, name: str) -> str:
-    return f'{ns}/{name}' if ns else name
+class WorkerState(enum.Enum):
+    """A worker's place in the evaluator's pool."""
 
-
-def is_pattern(namespace: str) -> bool:
-    return any(c in namespace for c in '*?[')
-
-
-def discover(node: Node, patterns: Iterable[str]) -> list[str]:
-    """Namespaces matching ``patterns`` (fnmatch) where a node publishes light and a node
-    subscribes to episode_start."""
-    found = []
-    for name, types in node.get_topic_names_and_types():
-        if not name.endswith('/' + LIGHT) or LIGHT_TYPE not in types:
-            continue
-        ns = name[:-len(LIGHT) - 1]
-        if any(fnmatchcase(ns or '/', p) for p in patterns) and node.count_publishers(name) \
-                and node.count_subscribers(f'{ns}/{EPISODE_START}'):
-            found.append(ns or '/')
-    return sorted(found)
-
-
-class Wake:
-    """What the callbacks set when there is news for the evaluator: an Event for a waiter
-    in another thread, and the Future of a wait that spins the executor itself."""
-
-    def __init__(self):
-        self._event = threading.Event()
-        self._future: Future | None = None
-
-    def set(self) -> None:
-        self._event.set()
-        future = self._future
-        if future is not None and not future.done():
-            future.set_result(True)
-
-    def arm(self) -> Future:
-        """A Future that the next ``set`` completes."""
-        self._future = Future()
-        return self._future
-
-    def wait(self, timeout_s: float) -> None:
-        self._event.wait(timeout_s)
-
-    def clear(self) -> None:
-        self._event.clear()
+    JOINING = 'joining'     # known, not yet connected and answering parameter requests
+    READY = 'ready'         # connected and answering: gets a share of every batch
+    LOST = 'lost'           # dropped after a failure, until both its nodes answer again
 
 
 class Worker:
@@ -241,10 +54,10 @@ class Worker:
                  robot_node: str = ''):
         self.node, self.dropped, self._wake = node, dropped, wake
         ns = namespace.rstrip('/')
-        self.topics = {n: _in(ns, n) for n in (LIGHT, CMD_TURN, BEARING, EPISODE_START,
-                                               FITNESS, GENOMES, GENOMES_LOADED)}
+        self.topics = {n: in_namespace(ns, n) for n in (
+            LIGHT, CMD_TURN, BEARING, EPISODE_START, FITNESS, GENOMES, GENOMES_LOADED)}
         self.name = node.resolve_topic_name(self.topics[LIGHT])[:-len(LIGHT) - 1] or '/'
-        self.controller_node = controller_node or _in(ns, 'controller')
+        self.controller_node = controller_node or in_namespace(ns, 'controller')
         self.robot_node = robot_node
         self._controller = AsyncParameterClient(node, self.controller_node)
         self._robot: AsyncParameterClient | None = None
@@ -265,7 +78,8 @@ class Worker:
             msg_type, unpacker = unpack[topic]
             node.create_subscription(msg_type, self.topics[topic],
                                      self._observer(topic, unpacker), protocol.QOS, raw=True)
-        self.alive, self.joined, self.reason = True, False, ''
+        self.state = WorkerState.JOINING
+        self.reason = ''                        # why it was lost
         self.queue: deque[Chunk] = deque()
         self.chunk: Chunk | None = None
         self.episode: Episode | None = None
@@ -500,7 +314,7 @@ class Worker:
         held = ([self.chunk] if self.chunk is not None else []) + list(self.queue)
         self.queue.clear()
         self.release()
-        self.alive, self.reason, self.failures = False, reason, self.failures + 1
+        self.state, self.reason, self.failures = WorkerState.LOST, reason, self.failures + 1
         self._probe = None
         return held
 
@@ -520,7 +334,20 @@ class Worker:
         return False
 
     def rejoin(self) -> None:
-        self.alive, self.reason, self._probe = True, '', None
+        """Back from LOST: READY at once if its robot node still listens (it has just
+        answered), else JOINING."""
+        self.state = WorkerState.READY if self.listening() else WorkerState.JOINING
+        self.reason, self._probe = '', None
+
+    def check_joined(self, timeout_s: float) -> bool:
+        """Move between JOINING and READY (not LOST); True when it has just become READY.
+        A READY worker is checked cheaply: its robot node still listens."""
+        if self.state is WorkerState.LOST:
+            return False
+        was_ready = self.state is WorkerState.READY
+        ready = was_ready and self.listening() or self.ready(timeout_s)
+        self.state = WorkerState.READY if ready else WorkerState.JOINING
+        return ready and not was_ready
 
     def record(self) -> dict:
         """For the results: who it is, what it did, its measured cost, why it left."""
@@ -529,7 +356,7 @@ class Worker:
                 'controller_node': self.controller_node, 'episodes': self.episodes,
                 'robots': self.robots, 'failures': self.failures,
                 'latency_s': latency, 'robot_steps_per_s': per_robot and 1 / per_robot,
-                'dropped': None if self.alive else self.reason}
+                'dropped': self.reason if self.state is WorkerState.LOST else None}
 
     def _observer(self, topic: str, unpack) -> Callable:
         def observe(msg) -> None:
