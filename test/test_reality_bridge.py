@@ -12,12 +12,13 @@ from khepera_noise_ros.core import baseline
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task
 from khepera_noise_ros.reality import emulator as emulator_module
-from khepera_noise_ros.reality import khepera_robot
+from khepera_noise_ros.reality import serial_robots
 from khepera_noise_ros.reality import serial_protocol as sp
 from khepera_noise_ros.reality.effects import EffectsConfig
 from khepera_noise_ros.reality.emulator import Emulator
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots, \
-    Replies, RobotUnreachable, SerialRobots, exchange, request
+    RobotUnreachable, SerialRobots
+from khepera_noise_ros.reality.serial_link import Replies, exchange, request
 from khepera_noise_ros.reality.world import EmulatedWorld
 
 QUIET = EffectsConfig.none(sensor_noise=0.0)
@@ -45,7 +46,7 @@ def in_process(seeds, start, world_seed=9):
 
 @pytest.fixture
 def caplog_warnings(caplog):
-    caplog.set_level(logging.INFO, logger='khepera_noise_ros.reality.khepera_robot')
+    caplog.set_level(logging.INFO, logger='khepera_noise_ros.reality.serial_robots')
     return caplog
 
 
@@ -88,7 +89,7 @@ def test_a_lost_reply_to_a_move_that_the_next_move_supersedes_is_not_resent(capl
 
 
 def test_counters_are_zeroed_before_they_run_out_of_range(monkeypatch):
-    monkeypatch.setattr(khepera_robot, 'REZERO_PULSES', 300)
+    monkeypatch.setattr(serial_robots, 'REZERO_PULSES', 300)
     seeds, start = [21, 22], [15.0, -40.0]
     with Emulator(EmulatedWorld(seed=9, robots=2)) as em:
         backend = serial_backend(em)
