@@ -8,6 +8,7 @@ from std_msgs.msg import Float64MultiArray
 
 from khepera_noise_ros import cli
 from khepera_noise_ros.commands import record as record_command
+from khepera_noise_ros.nodes.recorder import Recorder
 from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.khepera import World
 from khepera_noise_ros.core.noise import NoiseModel
@@ -89,7 +90,7 @@ def test_duplicated_readings_are_answered_but_kept_once(ros_context):
     try:
         for n in (robot, echo, node):
             executor.add_node(n)
-        recorder = record_command.Recorder(node, timeout_s=5.0)
+        recorder = Recorder(node, timeout_s=5.0)
         recorder.wait_for_robot(executor, 10.0)
         deadline = time.monotonic() + 10
         while repeat.get_subscription_count() < 2 and time.monotonic() < deadline:

@@ -12,7 +12,6 @@ node is started in this process (--robot) or is already running (--attach).
 from __future__ import annotations
 
 import time
-from collections import deque
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
@@ -21,7 +20,6 @@ import numpy as np
 import yaml
 
 from ..core import network
-from ..core.khepera import SENSORS
 from ..recording import (FORMAT, SOURCES, Recording, bag_path, concatenate, write_csv)
 
 HELP = 'record light readings from a robot node (stationary or closed loop) to CSV and MCAP'
@@ -60,140 +58,7 @@ def parse_conditions(text: str) -> dict[str, dict]:
     return {n: known[n] for n in names}
 
 
-# -- the recorder node --------------------------------------------------------------------
-
-class RobotUnavailable(RuntimeError):
-    """The robot node is not there or does not answer."""
-
-
-class Recorder:
-    """Drives one robot node through the topics and keeps what it sends; ROS is loaded lazily.
-
-    On the wire an episode is ``session + episode``: a session number taken from the
-    clock, so a robot node that ran an earlier session never mistakes a new episode
-    for a repeated start of an old one.  Recordings keep the episode numbers 0, 1, ...
-    """
-
-    def __init__(self, node, timeout_s: float = 5.0, pace_s: float = 0.0):
-        from std_msgs.msg import Float64MultiArray, Int32MultiArray
-
-        from ..nodes import protocol
-        from ..nodes.dropped import Dropped
-        self.node, self.protocol = node, protocol
-        self.timeout_s, self.pace_s = timeout_s, pace_s
-        self.dropped = Dropped(node)
-        self.resent = 0                 # readings that came again (answered, kept once)
-        self._start = node.create_publisher(Float64MultiArray, protocol.EPISODE_START,
-                                            protocol.QOS)
-        self._cmd = node.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
-        node.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
-                                 protocol.QOS)
-        node.create_subscription(Float64MultiArray, protocol.BEARING, self._on_bearing,
-                                 protocol.QOS)
-        self.session = time.time_ns() // 1_000_000 % 2 ** 30     # ids stay below 2**31
-        self.wire_episode: int | None = None
-        self._light: dict[int, np.ndarray] = {}
-        self._bearing: dict[int, float] = {}
-        self._queue: deque[int] = deque()
-
-    def _on_light(self, msg) -> None:
-        batch = self.dropped.unpacked(self.protocol.unpack_light, msg)
-        if batch is None:
-            return
-        if batch.episode != self.wire_episode:
-            self.dropped.add('other_episode', f'light for episode {batch.episode}', warn=False)
-            return
-        if batch.values.shape[0] != 1:
-            self.dropped.add('wrong_robots', f'light has {batch.values.shape[0]} robots, the '
-                             f'recorder drives 1')
-            return
-        if batch.step in self._light:
-            self.resent += 1
-        else:
-            self._light[batch.step] = batch.values[0].copy()
-        self._queue.append(batch.step)
-
-    def _on_bearing(self, msg) -> None:
-        batch = self.dropped.unpacked(self.protocol.unpack_bearing, msg)
-        if batch is None:
-            return
-        if batch.episode == self.wire_episode and batch.values.shape[0] == 1:
-            self._bearing.setdefault(batch.step, float(batch.values[0, 0]))
-
-    def wait_for_robot(self, executor, timeout_s: float) -> None:
-        """Until the robot node subscribes to our topics and publishes light."""
-        deadline = time.monotonic() + timeout_s
-        while not (self._start.get_subscription_count() and self._cmd.get_subscription_count()
-                   and self.node.count_publishers(self._light_topic())):
-            if time.monotonic() > deadline:
-                raise RobotUnavailable(f'no robot node on {self._light_topic()} within '
-                                       f'{timeout_s:g} s (is it running, in this namespace and '
-                                       f'ROS_DOMAIN_ID?)')
-            executor.spin_once(timeout_sec=0.05)
-
-    def _light_topic(self) -> str:
-        return self.node.resolve_topic_name(self.protocol.LIGHT)
-
-    def record_episode(self, executor, episode: int, seed: int, steps: int, policy: Policy,
-                       bearing_deg: float | None = None) -> 'EpisodeLog':
-        """Run one episode of ``steps`` readings; returns what came, and what never did."""
-        self.wire_episode, self._light, self._bearing = self.session + episode, {}, {}
-        self._queue.clear()
-        start = self.protocol.pack_episode_start(
-            self.wire_episode, [seed], None if bearing_deg is None else [bearing_deg])
-        answers: dict[int, tuple[int, int]] = {}
-        last_news = sent_start = time.monotonic()
-        self._start.publish(start)
-        next_due, grace = 0.0, None
-        while len(answers) < steps or (len(self._bearing) < len(self._light)
-                                       and time.monotonic() < grace):
-            executor.spin_once(timeout_sec=0.02)
-            now = time.monotonic()
-            while self._queue and now >= next_due:
-                step = self._queue.popleft()
-                if step >= steps:
-                    continue
-                if step not in answers:
-                    answers[step] = policy(self._light[step])
-                    next_due = now + self.pace_s
-                self._cmd.publish(self.protocol.pack_cmd_turn(
-                    self.wire_episode, step, [answers[step][0]], [answers[step][1]]))
-                last_news = now
-                if len(answers) == steps and grace is None:   # bearings may trail the light
-                    grace = now + min(1.0, self.timeout_s)
-            if not self._light and now - sent_start > min(1.0, self.timeout_s / 3):
-                self._start.publish(start)        # the robot ignores a repeated start
-                sent_start = now
-            if now - last_news > self.timeout_s:
-                break
-        return EpisodeLog(episode, dict(self._light), dict(self._bearing), answers,
-                          [s for s in range(steps) if s not in self._light])
-
-
-class EpisodeLog:
-    """One episode as recorded: readings, bearings and answers by step."""
-
-    def __init__(self, episode, light, bearing, answers, lost):
-        self.episode, self.light, self.bearing = episode, light, bearing
-        self.answers, self.lost = answers, lost
-
-    def recording(self, condition: str, manifest: dict, heading_deg: float | None,
-                  acted: bool) -> Recording:
-        """Rows in step order; stationary rows (not ``acted``) leave the command empty."""
-        steps = sorted(self.light)
-        n = len(steps)
-        bearing = np.array([self.bearing.get(s, np.nan) for s in steps], np.float64)
-        if heading_deg is not None:                 # the experimenter's fixed heading
-            bearing = np.where(np.isnan(bearing), heading_deg, bearing)
-        answers = np.array([self.answers.get(s, (np.nan, np.nan)) for s in steps],
-                           np.float64).reshape(n, 2)
-        empty = np.full(n, np.nan)
-        return Recording(
-            np.full(n, self.episode, np.int64), np.array(steps, np.int64), bearing,
-            np.full(n, condition),
-            np.array([self.light[s] for s in steps]).reshape(n, SENSORS),
-            answers[:, 0] if acted else empty, answers[:, 1] if acted else empty, manifest)
-
+# -- policies ----------------------------------------------------------------------------
 
 def hold_still(readings: np.ndarray) -> tuple[int, int]:
     """The stationary protocol's answer: no turn."""
@@ -207,51 +72,6 @@ def genome_policy(genome: np.ndarray) -> Policy:
         direction, power = network.act(weights, readings.reshape(-1, 1))
         return int(direction[0]), int(power[0])
     return policy
-
-
-# -- robot node parameters ----------------------------------------------------------------
-
-class RobotParameters:
-    """Get and set a robot node's parameters through its services, and put them back after."""
-
-    def __init__(self, node, executor, robot: str, timeout_s: float):
-        from rclpy.parameter_client import AsyncParameterClient
-        self.executor, self.robot, self.timeout_s = executor, robot, timeout_s
-        self.original: dict = {}
-        self.client = AsyncParameterClient(node, robot)
-        if not self.client.wait_for_services(timeout_sec=timeout_s):
-            raise RobotUnavailable(f'robot node {robot} offers no parameter services within '
-                                   f'{timeout_s:g} s')
-
-    def _wait(self, future):
-        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout_s)
-        if not future.done() or future.result() is None:
-            raise RobotUnavailable(f'robot node {self.robot} did not answer a parameter '
-                                   f'request')
-        return future.result()
-
-    def set(self, values: dict) -> None:
-        from rclpy.parameter import Parameter
-        first = [k for k in values if k not in self.original]
-        if first:
-            self.original.update(self.get(first))
-        params = [Parameter(k, value=float(v) if isinstance(v, float) else v)
-                  for k, v in values.items()]
-        results = self._wait(self.client.set_parameters(params)).results
-        refused = [f'{p.name}: {r.reason}' for p, r in zip(params, results) if not r.successful]
-        if refused:
-            raise ValueError(f'robot node {self.robot} refused ' + '; '.join(refused))
-
-    def restore(self) -> None:
-        """The values the robot node had before this session changed them."""
-        if self.original:
-            self.set(self.original)
-
-    def get(self, names: list[str]) -> dict:
-        from rclpy.parameter import parameter_value_to_python
-        values = self._wait(self.client.get_parameters(names)).values
-        return {n: parameter_value_to_python(v) for n, v in zip(names, values)
-                if v.type != 0}
 
 
 # -- in-process robot nodes ---------------------------------------------------------------
@@ -365,6 +185,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    from ..nodes.recorder import RobotUnavailable
     from ._options import UsageError
     if args.attach and not args.source:
         raise UsageError('--attach needs --source (simulator, emulator or hardware)')
@@ -403,6 +224,9 @@ def record(args, context=None, robot=None) -> tuple[Recording, dict]:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+
+    from ..nodes.recorder import Recorder
+    from ..nodes.robot_parameters import RobotParameters
     own = context is None
     if own:
         context = Context()
@@ -443,7 +267,7 @@ def record(args, context=None, robot=None) -> tuple[Recording, dict]:
             context.try_shutdown()
 
 
-def _base_manifest(args, params: RobotParameters, source: str, protocol: str) -> dict:
+def _base_manifest(args, params, source: str, protocol: str) -> dict:
     manifest = {'format': FORMAT, 'source': source, 'sample_period_s': args.period,
                 'protocol': protocol, 'conditions': {},
                 'recorded_at': datetime.now(timezone.utc).isoformat(timespec='seconds'),
