@@ -134,7 +134,7 @@ def record_closed_loop(world: EmulatedWorld, genome, condition='task',
         t = 0
         while readings is not None:
             direction, power = network.act(weights, readings.astype(np.float32))
-            rows.append((e, t, math.nan, condition, readings[:, 0].copy(), int(direction[0]),
+            rows.append((e, t, math.nan, condition, readings[0].copy(), int(direction[0]),
                          int(power[0])))
             readings = robots.step(direction, power)
             t += 1

@@ -32,7 +32,7 @@ def test_turning_right_moves_the_lamp_to_the_left():
 
 
 def test_fitness_factors_are_the_papers():
-    r = np.array([[100.0], [100.0], [100.0], [400.0], [400.0], [400.0], [0], [0]])
+    r = np.array([[100.0, 100.0, 100.0, 400.0, 400.0, 400.0, 0, 0]])
     balance, intensity, turning = task.fitness_factors(r, np.array([3]))
     assert balance[0] == pytest.approx(1 - 300 / 525)
     assert intensity[0] == pytest.approx(1 - 250 / 525)
@@ -67,7 +67,7 @@ def test_readings_follow_the_bearing_over_long_fast_turning_episodes():
     rng = np.random.default_rng(3)
     while readings is not None:
         index = khepera.to_tenths(env.bearing_deg)
-        assert np.array_equal(readings, table[:, index])
+        assert np.array_equal(readings, table[:, index].T)
         assert (np.abs(env.bearing_deg) <= 180).all()
         readings = env.step(rng.choice([-1, 1], 64), rng.integers(7, 10, 64))
 
@@ -102,7 +102,7 @@ def test_network_outputs_map_to_direction_and_power():
     g = np.zeros((2, network.GENES))
     g[0, 18], g[0, 19] = -5.0, 5.0     # output 0 low -> left, output 1 high -> power 9
     g[1, 18], g[1, 19] = 5.0, -0.2     # output 0 high -> right, sigmoid(-0.2)=0.45 -> power 4
-    direction, power = network.act(network.unpack(g), np.full((8, 2), 300.0, np.float32))
+    direction, power = network.act(network.unpack(g), np.full((2, 8), 300.0, np.float32))
     assert direction.tolist() == [-1, 1] and power.tolist() == [9, 4]
 
 

@@ -540,7 +540,7 @@ def replay(batches, world_seed: int, robots: int) -> list[np.ndarray]:
         readings = backend.reset(seeds)
         while readings is not None:                     # float32, as the controller computes
             direction, power = network.act(weights, readings.astype(np.float32))
-            rows.append((readings.T.astype(np.float32), power))
+            rows.append((readings.astype(np.float32), power))
             readings = backend.step(direction, power)
         out.append(episode_fitness(np.stack([r for r, _ in rows]),
                                    np.stack([p for _, p in rows])))

@@ -43,9 +43,9 @@ def test_latency_delays_readings_and_survives_a_new_noise_model():
     env.noise = NoiseModel('none')                 # as a node does on a parameter change
     assert len(env.noise.reading) == 1
     lagged = _still(env, seeds)
-    assert np.array_equal(lagged[1:, :2], plain[:-1, :2])      # one step late
-    assert np.array_equal(lagged[0, :2], plain[0, :2])         # the first repeats
-    assert np.array_equal(lagged[:, 2:], plain[:, 2:])
+    assert np.array_equal(lagged[1:, :, :2], plain[:-1, :, :2])      # one step late
+    assert np.array_equal(lagged[0, :, :2], plain[0, :, :2])         # the first repeats
+    assert np.array_equal(lagged[:, :, 2:], plain[:, :, 2:])
 
 
 def test_effects_and_parameters_round_trip_through_a_params_file(tmp_path):

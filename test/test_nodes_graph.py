@@ -291,7 +291,7 @@ def test_tagged_genomes_answer_their_episode_and_the_running_one_is_kept(ros_con
 
     def expected(genomes):
         return np.column_stack(network.act(network.unpack(genomes),
-                                           readings.T.astype(np.float32)))
+                                           readings.astype(np.float32)))
     tagged = GENOMES[2:4] * -3
     with spinning([ctrl, probe], ros_context):
         assert probe.connected(protocol.LIGHT) and wait_for(

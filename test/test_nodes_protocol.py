@@ -105,7 +105,7 @@ def test_malformed_messages_raise_with_the_reason(make, unpack, words):
 
 
 def test_light_holds_one_row_of_robots_per_sensor():
-    """Sensor-major, as the network consumes it: no transpose on either side."""
+    """Sensor-major on the wire (the layout recorded bags have), (B, 8) in Python."""
     readings = np.arange(8 * 3, dtype=np.float64).reshape(8, 3)     # (sensors, robots)
     msg = protocol.pack_light(4, 5, readings.T)
     assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [('sensors', 8, 24),
@@ -171,7 +171,7 @@ def test_episode_fitness_sums_like_the_core():
     power = rng.integers(0, 10, (30, 4))
     total = np.zeros(4, np.float32)
     for t in range(30):
-        total += step_fitness(readings[t].T, power[t])
+        total += step_fitness(readings[t], power[t])
     np.testing.assert_array_equal(episode_fitness(readings, power), total / 30)
 
 

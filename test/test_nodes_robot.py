@@ -38,13 +38,13 @@ def test_lockstep_steps_only_on_the_current_command(ros_context):
     probe = Probe(ros_context)
     commands = [([1, -1, 1], [3, 9, 0]), ([-1, -1, 1], [1, 2, 5]), ([1, 1, 1], [9, 9, 9])]
     core = Episodes(noise=NoiseModel(), task=Task(steps=3))
-    expected = [core.reset(np.array(SEEDS), 3).T.copy()]
+    expected = [core.reset(np.array(SEEDS), 3).copy()]
     expected_bearing = [core.bearing_deg.copy()]
     score = np.zeros(3, np.float32)
     for direction, power in commands:
         score += step_fitness(core.readings, np.array(power))
         readings = core.step(direction, power)
-        expected.append(None if readings is None else readings.T.copy())
+        expected.append(None if readings is None else readings.copy())
         expected_bearing.append(core.bearing_deg.copy())
     with spinning([sim, probe], ros_context):
         assert probe.connected(EPISODE_START) and probe.connected(CMD_TURN)
@@ -237,7 +237,7 @@ def core_still(seeds, steps: int, effects=()) -> np.ndarray:
     env = EffectEpisodes(task=Task(steps=steps), effects=effects)
     out, readings = [], env.reset(np.array(seeds))
     while readings is not None:
-        out.append(readings.T.copy())
+        out.append(readings.copy())
         readings = env.step(np.ones(len(seeds), int), np.zeros(len(seeds), int))
     return np.stack(out)
 

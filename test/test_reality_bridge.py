@@ -26,7 +26,7 @@ TASK = Task(steps=12)
 
 
 def run(backend, seeds, bearing=None, policy=baseline.turn_toward_light, before_step=None):
-    """(readings (T, 8, B), bearings (T, B)) of one closed-loop episode;
+    """(readings (T, B, 8), bearings (T, B)) of one closed-loop episode;
     ``before_step(t)`` is called before step t."""
     readings = backend.reset(seeds, bearing_deg=bearing)
     out, bearings = [], []
@@ -167,7 +167,7 @@ def test_serial_faults_are_logged_and_retried(caplog_warnings, fault):
         backend = serial_backend(em, retries=2)
         backend.reset([1])
         em.inject(0, fault, count=2)
-        assert backend.step([1], [4]).shape == (8, 1)
+        assert backend.step([1], [4]).shape == (1, 8)
         backend.close()
     retries = [r.getMessage() for r in caplog_warnings.records if 'retrying' in r.getMessage()]
     assert len(retries) == 2 and 'robot 0' in retries[0]
@@ -183,7 +183,7 @@ def test_an_unreachable_robot_fails_the_episode_and_stops(caplog_warnings):
             backend.step([1], [5])
         assert backend.failed and backend.done
         assert em.robots[0].speeds.tolist() == [0.0, 0.0]
-        assert backend.reset([2]).shape == (8, 1)                     # a new episode works
+        assert backend.reset([2]).shape == (1, 8)                     # a new episode works
         backend.close()
 
 
@@ -241,7 +241,7 @@ def test_an_episode_survives_a_noisy_line(caplog_warnings):
         backend = serial_backend(em, timeout_s=0.05, retries=5)
         readings, _ = run(backend, [7, 8])
         backend.close()
-    assert readings.shape == (TASK.steps, 8, 2) and not backend.failed
+    assert readings.shape == (TASK.steps, 2, 8) and not backend.failed
     assert any('retrying' in r.getMessage() for r in caplog_warnings.records)
 
 

@@ -59,7 +59,7 @@ def in_process_fitness(genomes, seeds, robots):
     readings, rows = backend.reset(seeds), []
     while readings is not None:
         direction, power = network.act(weights, readings)
-        rows.append((readings.T.astype(np.float32), power))
+        rows.append((readings.astype(np.float32), power))
         readings = backend.step(direction, power)
     return episode_fitness(np.stack([r for r, _ in rows]), np.stack([p for _, p in rows]))
 

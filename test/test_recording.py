@@ -26,7 +26,7 @@ def stationary(noise=NoiseModel(), headings=(0.0, 30.0), steps=20, seed=1,
     readings, rows = env.reset(seed, len(headings), bearing_deg=headings), []
     zeros = np.zeros(len(headings), np.int32)
     while readings is not None:
-        rows.append((env.bearing_deg, readings.T.copy(), zeros + 1, zeros))
+        rows.append((env.bearing_deg, readings.copy(), zeros + 1, zeros))
         readings = env.step(zeros + 1, zeros)
     trace = Trace(*(np.stack(c) for c in zip(*rows)))
     return from_trace(trace, condition, manifest([condition], noise={'model': noise.model}),

@@ -24,7 +24,7 @@ def core_stationary(world: World, seed: int, heading: float, samples: int) -> np
     env = Episodes(world, NoiseModel(), Task(steps=samples, perturbation_deg=0))
     readings, rows = env.reset([seed], 1, bearing_deg=heading), []
     while readings is not None:
-        rows.append(readings[:, 0])
+        rows.append(readings[0])
         readings = env.step([1], [0])
     return np.array(rows)
 

@@ -69,7 +69,7 @@ def genome_policy(genome: np.ndarray) -> Policy:
     weights = network.unpack(genome)
 
     def policy(readings: np.ndarray) -> tuple[int, int]:
-        direction, power = network.act(weights, readings.reshape(-1, 1))
+        direction, power = network.act(weights, readings.reshape(1, -1))
         return int(direction[0]), int(power[0])
     return policy
 

@@ -71,8 +71,15 @@ def pack(w: Weights) -> np.ndarray:
 
 
 def inputs(readings: np.ndarray) -> np.ndarray:
-    """The paper's input(n) = 1 - sensor(n)/525 for the front six sensors."""
-    return 1.0 - readings[:FRONT] * np.float32(1.0 / DARK)
+    """The paper's input(n) = 1 - sensor(n)/525 for the front six sensors.
+
+    Args:
+        readings: (B, SENSORS or FRONT) readings.
+
+    Returns:
+        (B, FRONT) inputs.
+    """
+    return 1.0 - readings[:, :FRONT] * np.float32(1.0 / DARK)
 
 
 def _logistic(z: np.ndarray) -> np.ndarray:
@@ -84,12 +91,20 @@ def _logistic(z: np.ndarray) -> np.ndarray:
 
 
 def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
-    """(OUTPUTS, B) activations for (SENSORS or FRONT, B) readings."""
-    return _logistic(_output_net(w, readings))
+    """The output units' activations.
+
+    Args:
+        w: B networks.
+        readings: (B, SENSORS or FRONT) float32 readings.
+
+    Returns:
+        (B, OUTPUTS) activations in (0, 1).
+    """
+    return _logistic(_output_net(w, readings)).T
 
 
 def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
-    hidden = np.einsum('ib,ijb->jb', readings[:FRONT], w._w_reading)
+    hidden = np.einsum('bi,ijb->jb', readings[:, :FRONT], w._w_reading)
     hidden += w._b_reading
     net = np.einsum('jb,jkb->kb', _logistic(hidden), w.w_ho)
     net += w.b_o
@@ -97,7 +112,16 @@ def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
 
 
 def act(w: Weights, readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Turn commands (direction -1/+1, power 0..9) as int arrays of shape (B,)."""
+    """The networks' turn commands.
+
+    Args:
+        w: B networks (``unpack``).
+        readings: (B, SENSORS or FRONT) float32 readings, 0 brightest .. 525 darkest.
+
+    Returns:
+        (direction, power): int32 arrays of shape (B,), direction -1 (left) or +1 (right),
+        power 0..9.
+    """
     net = _output_net(w, readings)
     # logistic(net) < 0.5 exactly when net < 0: the direction needs no exp.  RIGHT - 2 *
     # (net < 0) in three cheap passes: np.where with two scalars costs more than all three.

@@ -20,6 +20,7 @@ from .noise import NoiseModel, realrand
 # A step moves a bearing by at most 9 x 40 deg of turn plus a 180 deg knock, so wrapping
 # every few steps keeps the grid index a few turns from the table.
 WRAP_EVERY = 8
+# (B, SENSORS) readings -> (direction (B,), power (B,))
 Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -55,19 +56,27 @@ def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
 
 
 def fitness_factors(readings: np.ndarray, power: np.ndarray):
-    """(balance, intensity, turning), each (B,), from (>=6, B) readings and (B,) power."""
+    """The paper's three factors of a step's fitness.
+
+    Args:
+        readings: (B, >=6) float32 readings (any leading axes, such as steps, may precede B).
+        power: (B,) commanded power.
+
+    Returns:
+        (balance, intensity, turning), each of power's shape, float32.
+    """
     # in place where possible: the same operations in the same order, fewer temporaries
-    left = readings[0] + readings[1]
-    left += readings[2]
+    left = readings[..., 0] + readings[..., 1]
+    left += readings[..., 2]
     left *= np.float32(1 / 3)
-    right = readings[3] + readings[4]
-    right += readings[5]
+    right = readings[..., 3] + readings[..., 4]
+    right += readings[..., 5]
     right *= np.float32(1 / 3)
     balance = np.subtract(left, right, out=left)
     np.abs(balance, out=balance)
     balance *= np.float32(1 / DARK)
     np.subtract(1.0, balance, out=balance)
-    intensity = readings[2] + readings[3]
+    intensity = readings[..., 2] + readings[..., 3]
     intensity *= np.float32(0.5 / DARK)
     np.subtract(1.0, intensity, out=intensity)
     turning = (np.asarray(power) != 0).astype(np.float32)
@@ -75,6 +84,15 @@ def fitness_factors(readings: np.ndarray, power: np.ndarray):
 
 
 def step_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """balance x intensity x turning of one step.
+
+    Args:
+        readings: (B, >=6) float32 readings (leading axes allowed, as in fitness_factors).
+        power: (B,) commanded power.
+
+    Returns:
+        (B,) float32 step fitness.
+    """
     balance, intensity, turning = fitness_factors(readings, power)
     balance *= intensity
     balance *= turning
@@ -121,7 +139,16 @@ class Episodes:
         return to_degrees(self._bearing)
 
     def reset(self, seed, robots: int | None = None, bearing_deg=None) -> np.ndarray:
-        """Start B episodes; returns the first (SENSORS, B) readings."""
+        """Start B episodes.
+
+        Args:
+            seed: an int (one generator for the batch) or B ints (one stream per robot).
+            robots: B, when ``seed`` is an int.
+            bearing_deg: start bearings (scalar or (B,)), default 0.
+
+        Returns:
+            The first (B, SENSORS) float32 readings.
+        """
         robots = robots if robots is not None else np.size(seed)
         self._stream = streams.make_stream(seed, robots)
         start = np.zeros(robots) if bearing_deg is None else np.broadcast_to(bearing_deg, robots)
@@ -131,7 +158,15 @@ class Episodes:
         return self.readings
 
     def step(self, direction, power) -> np.ndarray | None:
-        """Apply one turn per robot; returns the next readings, or None when done."""
+        """Apply one turn per robot.
+
+        Args:
+            direction: (B,) -1 (left) or +1 (right).
+            power: (B,) 0..9.
+
+        Returns:
+            The next (B, SENSORS) readings, or None when the episode is over.
+        """
         if self.done:
             raise RuntimeError('the episode is over; call reset()')
         self._bearing = turn(self._bearing, np.asarray(direction, np.int32),
@@ -150,7 +185,11 @@ class Episodes:
         rows = np.take(self._table, self._bearing, axis=0, mode='wrap')
         base = np.empty(rows.shape[::-1], rows.dtype)
         base[...] = rows.T
-        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
+        noisy = self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
+        # The one transpose of the hot path, and a free one (a view): memory stays
+        # sensor-major, so the noise, the network and the fitness each read a sensor's
+        # values for the whole batch as one contiguous row; callers see (B, SENSORS).
+        return noisy.T
 
 
 @dataclass
@@ -164,12 +203,22 @@ class Trace:
     fitness: np.ndarray = field(init=False)
 
     def __post_init__(self):
-        self.fitness = step_fitness(np.moveaxis(self.readings, 2, 0), self.power)
+        self.fitness = step_fitness(self.readings, self.power)
 
 
 def run(policy: Policy, seed, robots: int | None = None, world: World = World(),
         noise: NoiseModel = NoiseModel(), task: Task = Task(), trace: bool = False):
-    """Run B episodes under ``policy``; returns fitness (B,) or a Trace."""
+    """Run B episodes under ``policy``.
+
+    Args:
+        policy: (B, SENSORS) readings -> (direction (B,), power (B,)).
+        seed, robots: as for ``Episodes.reset``.
+        world, noise, task: the episode's setting.
+        trace: return the per-step record instead of the fitness.
+
+    Returns:
+        (B,) float32 fitness, the mean step fitness summed step by step; or a ``Trace``.
+    """
     env = Episodes(world, noise, task)
     readings = env.reset(seed, robots)
     total = np.zeros(env.robots, np.float32)
@@ -178,7 +227,7 @@ def run(policy: Policy, seed, robots: int | None = None, world: World = World(),
         direction, power = policy(readings)
         total += step_fitness(readings, power)
         if trace:
-            rows.append((env.bearing_deg, readings.T.copy(), direction, power))
+            rows.append((env.bearing_deg, readings.copy(), direction, power))
         readings = env.step(direction, power)
     if trace:
         return Trace(*(np.stack(col) for col in zip(*rows)))

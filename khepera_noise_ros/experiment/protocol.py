@@ -162,7 +162,7 @@ def play(backend, genomes, seeds) -> tuple[np.ndarray, task.Trace]:
         total += task.step_fitness(readings, power)
         bearing = backend.bearing_deg
         rows.append((np.full(len(seeds), np.nan) if bearing is None else bearing,
-                     readings.T.copy(), direction, power))
+                     readings.copy(), direction, power))
         readings = backend.step(direction, power)
     trace = task.Trace(*(np.stack(col) for col in zip(*rows)))
     return (total / len(rows)).astype(np.float64), trace

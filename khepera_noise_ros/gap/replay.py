@@ -195,7 +195,7 @@ def _run(env, genome, seeds, episodes, replicates, label, span) -> dict:
     rows = []
     while readings is not None:
         direction, power = network.act(w, readings)
-        rows.append((env.step_index, env.bearing_deg.copy(), readings.T.copy(), direction,
+        rows.append((env.step_index, env.bearing_deg.copy(), readings.copy(), direction,
                      power))
         readings = env.step(direction, power)
     t = len(rows)

@@ -118,7 +118,7 @@ class Controller(Node):
             self.dropped.add('wrong_robots', f'light ({batch.episode}, {batch.step}) has '
                              f'{batch.values.shape[0]} robots, genomes hold {robots}')
             return
-        readings = batch.values.T.astype(np.float32)    # light is sensor-major: (8, B) rows
+        readings = batch.values.astype(np.float32)      # (B, 8); sensor-major in memory
         direction, power = network.act(weights, readings)
         self._pub.publish(protocol.pack_cmd_turn(batch.episode, batch.step, direction, power,
                                                  raw=True))

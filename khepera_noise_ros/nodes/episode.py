@@ -24,7 +24,7 @@ def episode_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
     """
     total = np.zeros(readings.shape[1], np.float32)
     for step_readings, step_power in zip(readings, power):
-        total += step_fitness(step_readings.T, step_power)
+        total += step_fitness(step_readings, step_power)
     return (total / len(readings)).astype(np.float64)
 
 

@@ -1,8 +1,8 @@
 """A robot node: the lockstep and real-time protocol of ``protocol`` over a backend.
 
 The node only carries messages; a *backend* owns the robots.  Any object with
-``reset(seed, robots=None, bearing_deg=None) -> readings (8, B)``,
-``step(direction (B,), power (B,)) -> readings (8, B) or None when the episode
+``reset(seed, robots=None, bearing_deg=None) -> readings (B, 8)``,
+``step(direction (B,), power (B,)) -> readings (B, 8) or None when the episode
 is over``, and attributes ``task`` (core Task), ``bearing_deg`` ((B,) degrees or
 None when unknown) and ``done`` will do: ``core.task.Episodes`` for the
 simulator, a serial link for the hardware bridge.  A subclass adds its own
@@ -198,7 +198,7 @@ class RobotNode(Node):
             self.end_episode(f'episode {episode} could not start: {exc}', error=True)
             return
         self.episode, self.step_index, self._pending_cmd = episode, 0, None
-        self._score = np.zeros(np.shape(readings)[1], np.float32)
+        self._score = np.zeros(np.shape(readings)[0], np.float32)
         self._publish(readings)
 
     def _on_cmd_turn(self, msg: bytes) -> None:
@@ -250,7 +250,7 @@ class RobotNode(Node):
         bearing is packed only while someone subscribes to it."""
         episode, step = self.episode, self.step_index
         if readings is not None:
-            self._robots = readings.shape[1]
+            self._robots = readings.shape[0]
             self._readings = np.asarray(readings, np.float32)
         self._last = []
         if self._pub_bearing.get_subscription_count():
@@ -261,7 +261,7 @@ class RobotNode(Node):
                                protocol.pack_bearing(episode, step, bearing, raw=True)))
         if readings is not None:
             self._last.append((self._pub_light,
-                               protocol.pack_light(episode, step, readings.T, raw=True)))
+                               protocol.pack_light(episode, step, readings, raw=True)))
         else:
             self._last.append((self._pub_fitness, protocol.pack_fitness(
                 episode, step, self._score / np.float32(step), raw=True)))
@@ -302,10 +302,10 @@ class RobotNode(Node):
 
 
 def _check_readings(readings) -> None:
-    """A backend's (8, B) readings must keep the light contract, else ValueError."""
+    """A backend's (B, 8) readings must keep the light contract, else ValueError."""
     shape = np.shape(readings)
-    if len(shape) != 2 or shape[0] != SENSORS or shape[1] < 1:
-        raise ValueError(f'the backend gave readings of shape {shape}, not ({SENSORS}, robots)')
+    if len(shape) != 2 or shape[1] != SENSORS or shape[0] < 1:
+        raise ValueError(f'the backend gave readings of shape {shape}, not (robots, {SENSORS})')
     readings = np.asarray(readings)
     if not protocol.within(readings, DARK):
         raise ValueError(f'the backend gave readings outside [0, {DARK:g}] (or NaN): '

@@ -32,7 +32,7 @@ class Robots(Protocol):
 
     def act(self, turns: list[np.ndarray], read: bool) -> np.ndarray | None:
         """Turn robot i by ``turns[k][i]`` pulses for each k in order, then, if ``read``,
-        return the (8, B) light readings.  One call, so that a link can send it at once."""
+        return the (B, 8) light readings.  One call, so that a link can send it at once."""
 
     @property
     def bearing_deg(self) -> np.ndarray | None: ...
@@ -159,7 +159,7 @@ class InProcessRobots:
             moving = np.flatnonzero(pulses)
             if moving.size:
                 self.world.turn(pulses[moving] * self.wheels.deg_per_pulse, moving)
-        return self.world.read(self._active).T if read else None
+        return self.world.read(self._active) if read else None
 
     @property
     def bearing_deg(self) -> np.ndarray:

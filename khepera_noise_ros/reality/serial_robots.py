@@ -104,7 +104,7 @@ class SerialRobots:
         self._bearing = np.array([replies[link][-1][0] for link in self._active]) \
             if self.emulated else None
         return np.array([replies[link][len(scripts[link]) - len(asks)]
-                         for link in self._active]).T
+                         for link in self._active])
 
     def _aim(self, moves: list[dict[SerialLink, int]]) -> dict[SerialLink, list[Request]]:
         """C commands making ``moves`` one after the other, each sending a robot's wheels
