@@ -183,13 +183,14 @@ class Episodes:
             self._bearing %= TENTHS
         # 'wrap' costs a compare per robot where a modulo every step cost a division
         rows = np.take(self._table, self._bearing, axis=0, mode='wrap')
+        # The hot path's one change of orientation.  The look-up gives each robot's 8
+        # readings as a row; the noise, the network and the fitness work sensor by sensor,
+        # so the readings are laid out sensor-major once, here, and handed out as a
+        # (B, SENSORS) view of that memory: each sensor's values for the whole batch stay
+        # one contiguous row, and no caller transposes.
         base = np.empty(rows.shape[::-1], rows.dtype)
         base[...] = rows.T
-        noisy = self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base)
-        # The one transpose of the hot path, and a free one (a view): memory stays
-        # sensor-major, so the noise, the network and the fitness each read a sensor's
-        # values for the whole batch as one contiguous row; callers see (B, SENSORS).
-        return noisy.T
+        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base).T
 
 
 @dataclass
