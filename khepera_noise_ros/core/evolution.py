@@ -1,24 +1,9 @@
 """The appendix's steady-state tournament EA, as an ask/tell state machine.
 
-A generation is ``population`` tournaments.  A tournament draws two distinct
-members at random; the fitter one (the first drawn on a tie) wins, and the
-loser is replaced by a mutant of the winner: every gene plus U(-1, 1).  A
-random start draws genes from U(-0.4, 0.4); a seeded start mutates the seed.
-
-Noisy fitness, ``fitness`` setting:
-  'stored'      each individual is evaluated once, when it is born, and that
-                value is used in every tournament it enters (the default);
-  'reevaluate'  both members are evaluated afresh in every tournament.
-The best individual, ``best`` setting:
-  'ever'        the individual with the highest single evaluation seen in the
-                run, and the generation it was seen in (the default);
-  'final'       the fittest member of the last population by stored value;
-  'retest'      the last population re-evaluated ``retest_episodes`` times
-                each, the highest mean wins (guards against lucky episodes).
-
-``ask()`` returns the genomes to evaluate next and one episode seed each;
-``tell()`` takes their fitness.  Many EAs can be asked together and their
-requests evaluated as one batch: results never depend on the batching.
+A generation is ``population`` tournaments: two distinct members drawn at random, the
+fitter (the first drawn on a tie) wins, and the loser is replaced by a mutant of the
+winner (every gene plus U(-1, 1)).  ``ask()`` gives genomes and seeds, ``tell()`` takes
+their fitness; many EAs can be evaluated as one batch without changing any result.
 """
 from __future__ import annotations
 
@@ -34,6 +19,21 @@ BEST_MODES = ('ever', 'final', 'retest')
 
 @dataclass(frozen=True)
 class EAConfig:
+    """The EA's settings; a bad value is a ValueError naming it.
+
+    Args:
+        population: members, >= 2.
+        generations: generations of ``population`` tournaments each, >= 0.
+        init_range: a random start draws genes from U(-init_range, init_range).
+        mutation_range: a mutant's genes move by U(-mutation_range, mutation_range).
+        fitness: 'stored' (each individual evaluated once, when born) or 'reevaluate'
+            (both members afresh in every tournament).
+        best: 'ever' (the highest single evaluation of the run), 'final' (the fittest
+            of the last population) or 'retest' (the last population evaluated
+            ``retest_episodes`` times each, the highest mean).
+        retest_episodes: episodes per member for best='retest'.
+    """
+
     population: int = 25
     generations: int = 50
     init_range: float = 0.4
@@ -97,6 +97,11 @@ class SteadyStateEA:
     """
 
     def __init__(self, config: EAConfig = PHASE1, seed: int = 0, seed_genome=None):
+        """Args:
+            config: the EA's settings.
+            seed: of every random draw of the run (members, pairs, mutations, seeds).
+            seed_genome: (20,) genome the start population mutates; None: a random start.
+        """
         self.config = cfg = config
         self.rng = rng = np.random.default_rng(seed)
         self.seed_genome = None if seed_genome is None else check_genomes(seed_genome)[0]
@@ -132,16 +137,30 @@ class SteadyStateEA:
 
     @property
     def done(self) -> bool:
+        """The run is over: nothing more to ask."""
         return self._stage == 'done'
 
     def ask(self) -> tuple[np.ndarray, np.ndarray]:
-        """(genomes (n, 20), episode seeds (n,)) awaiting evaluation; n = 0 when done."""
+        """The evaluations the run waits for.
+
+        Returns:
+            (genomes (n, 20), episode seeds (n,)); n = 0 when done.
+        """
         if self._asked is None:
             self._asked = self._next_batch()
         genomes, seeds, _ = self._asked
         return genomes.copy(), seeds.copy()
 
     def tell(self, fitness) -> None:
+        """Take the fitness of what ``ask()`` gave.
+
+        Args:
+            fitness: (n,) finite values, in the order asked.
+
+        Raises:
+            ValueError: the wrong number of values, or one not finite.
+            RuntimeError: the run is done.
+        """
         if self.done:
             raise RuntimeError('the EA is done; nothing was asked')
         genomes, seeds, owners = self._asked if self._asked is not None else self._next_batch()
@@ -284,8 +303,10 @@ class SteadyStateEA:
 def evolve(eas: list[SteadyStateEA], evaluate, progress=None) -> None:
     """Drive several EAs to the end, evaluating all their requests as one batch.
 
-    ``evaluate(genomes (n, 20), seeds (n,)) -> fitness (n,)``.  ``progress(eas)``
-    is called after each batch.
+    Args:
+        eas: the runs.
+        evaluate: ``(genomes (n, 20), seeds (n,)) -> fitness (n,)``.
+        progress: called with ``eas`` after each batch.
     """
     while True:
         active = [ea for ea in eas if not ea.done]

@@ -39,7 +39,17 @@ class Weights:
 
 
 def check_genomes(genomes) -> np.ndarray:
-    """Genomes as a finite (B, 20) float array, or a ValueError naming the problem."""
+    """Checked genomes.
+
+    Args:
+        genomes: (B, 20) or one (20,) genome.
+
+    Returns:
+        (B, 20) float64 genomes.
+
+    Raises:
+        ValueError: a wrong shape, or a gene that is not finite or beyond +-MAX_GENE.
+    """
     g = np.asarray(genomes, dtype=np.float64)
     if g.ndim == 1:
         g = g[None, :]
@@ -54,6 +64,7 @@ def check_genomes(genomes) -> np.ndarray:
 
 
 def unpack(genomes) -> Weights:
+    """The networks of (B, 20) genomes (checked), in float32, robot index last."""
     g = check_genomes(genomes).astype(np.float32).T          # (20, B)
     n_ih = INPUTS * HIDDEN
     n_ho = HIDDEN * OUTPUTS
@@ -65,7 +76,7 @@ def unpack(genomes) -> Weights:
 
 
 def pack(w: Weights) -> np.ndarray:
-    """Inverse of unpack: (B, 20) genomes."""
+    """The inverse of ``unpack``: (B, 20) genomes."""
     b = w.b_o.shape[-1]
     return np.concatenate([w.w_ih.reshape(-1, b), w.w_ho.reshape(-1, b), w.b_h, w.b_o]).T
 

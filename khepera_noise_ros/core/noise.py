@@ -74,6 +74,7 @@ class NoiseModel:
 
     @classmethod
     def independent_only(cls, level: float, **kw) -> 'NoiseModel':
+        """The independent model at ``level``."""
         return cls(model='independent', dependent=0.0, independent=level, **kw)
 
     @property
@@ -87,11 +88,20 @@ class NoiseModel:
 
     def apply(self, base: np.ndarray, sensor_draws: np.ndarray,
               group_draws: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Noisy readings, clipped to 0..525.
+        """Noisy readings, clipped to 0..525: the kernel behind ``task.Episodes``.
 
-        base: (SENSORS, B); sensor_draws: (SENSORS, B) uint16;
-        group_draws: (>= len(groups), B) uint16, one row per group.
-        ``out=base`` overwrites the base values instead of copying them.
+        Sensor-major, like the stream draws it consumes (one row per stream channel): the
+        batch-first (B, SENSORS) readings that ``Episodes`` hands out are a view of this
+        result (docs/architecture.md).
+
+        Args:
+            base: (SENSORS, B) noise-free readings.
+            sensor_draws: (SENSORS, B) uint16 draws for the independent parts.
+            group_draws: (>= len(groups), B) uint16 draws, one row per dependence group.
+            out: where to write; ``out=base`` overwrites the base values.
+
+        Returns:
+            (SENSORS, B) float32 readings.
         """
         d, i = self.levels
         dnoise = None
@@ -121,7 +131,16 @@ class NoiseModel:
         return np.trunc(x, out=x)
 
     def sample(self, base, rng: np.random.Generator, samples: int = 1) -> np.ndarray:
-        """(samples, len(base)) readings for fixed base values, drawn from ``rng``."""
+        """Readings of fixed base values, for plots and checks.
+
+        Args:
+            base: (C,) noise-free readings.
+            rng: the generator to draw from.
+            samples: how many readings of each.
+
+        Returns:
+            (samples, C) float32 readings.
+        """
         base = np.asarray(base, dtype=np.float32)
         if any(max(g) >= base.size for g in self.groups):
             raise ValueError(f'dependence groups {self.groups} name sensors beyond the '
@@ -133,7 +152,17 @@ class NoiseModel:
 
 
 def check_groups(groups) -> tuple:
-    """Validate dependence groups: disjoint, non-empty, sensor indices 0..7."""
+    """Checked dependence groups.
+
+    Args:
+        groups: sequences of sensor indices.
+
+    Returns:
+        The groups as a tuple of int tuples.
+
+    Raises:
+        ValueError: a group empty, naming a sensor outside 0..7, or overlapping another.
+    """
     try:
         groups = tuple(tuple(int(s) for s in g) for g in groups)
     except (TypeError, ValueError):
@@ -182,4 +211,5 @@ def parse_groups(text: str) -> tuple:
 
 
 def format_groups(groups) -> str:
+    """((0, 1, 2), (3, 4, 5)) -> '0,1,2;3,4,5', as ``parse_groups`` reads it."""
     return ';'.join(','.join(str(s) for s in g) for g in groups)

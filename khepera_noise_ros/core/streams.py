@@ -79,7 +79,19 @@ class RobotStreams:
 
 
 def make_stream(seed, robots: int):
-    """An int seeds a BatchStream; a sequence of per-robot seeds a RobotStreams."""
+    """The random stream of a batch of episodes.
+
+    Args:
+        seed: an int (one generator for the batch: a BatchStream) or one seed per robot
+            (a RobotStreams, what evolution uses).
+        robots: B.
+
+    Returns:
+        A stream whose ``draw(step, channels)`` gives (channels, B) uint16 draws.
+
+    Raises:
+        ValueError: as many seeds as robots are not given.
+    """
     if np.ndim(seed) == 0:
         return BatchStream(int(seed), robots)
     streams = RobotStreams(seed)

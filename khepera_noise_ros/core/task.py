@@ -26,6 +26,14 @@ Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 @dataclass(frozen=True)
 class Task:
+    """The episode's settings; a bad value is a ValueError naming it.
+
+    Args:
+        steps: control steps per episode, >= 1.
+        perturb_every: steps between heading knocks (step 0 included), >= 1.
+        perturbation_deg: a knock is uniform in +-perturbation_deg, in [0, 180].
+    """
+
     steps: int = 60
     perturb_every: int = 5
     perturbation_deg: float = 30.0
@@ -41,17 +49,22 @@ class Task:
 
 
 def knock_tenths(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
-    """The heading perturbation from the PERTURB channel, in tenths of a degree (int32,
-    not wrapped: within +-1800)."""
+    """The heading knocks of one step.
+
+    Args:
+        perturb_draws: (B,) uint16 draws of the PERTURB stream channel.
+        task: gives the knock's range.
+
+    Returns:
+        (B,) int32 knocks in tenths of a degree, within +-1800 (not wrapped).
+    """
     knock = (2 * realrand(perturb_draws) - 1) * task.perturbation_deg
     return np.rint(knock.astype(np.float64) * 10).astype(np.int32)
 
 
 def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
-    """The heading perturbation in degrees on the 0.1 deg grid, in [-180, 180).
-
-    Shared with the hardware bridge so that simulator and robot get the same knocks.
-    """
+    """``knock_tenths`` in degrees on the 0.1 deg grid, in [-180, 180); the hardware
+    bridge uses it so that simulator and robot get the same knocks."""
     return to_degrees(knock_tenths(perturb_draws, task))
 
 

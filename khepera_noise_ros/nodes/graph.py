@@ -1,42 +1,5 @@
-"""Evaluating genomes through the node graph: the topic counterpart of CoreEvaluator.
-
-``GraphEvaluator(genomes, seeds)`` splits the batch across its workers (pairs
-of a robot node and a controller, each in its own namespace), loads each
-part's genomes into its controller (the ``genomes`` parameter, through the
-SetParameters service), starts one batched episode on its robot node, and
-takes each genome's fitness from the robot node's ``fitness`` message, which
-scores the readings it published and the commands it applied with the core's
-``step_fitness``, in the same float32 arithmetic as ``core.task.run``.  With
-``trace=True`` it also observes every step's light, cmd_turn and bearing,
-recomputes the fitness from them and fails the episode if they disagree.
-Each robot's randomness comes from its own seed, so for the same genomes,
-noise model and seeds it returns exactly the core's numbers, whatever the
-number of workers and however the batch is split.
-
-The split follows each worker's measured speed: the time a step takes it is
-fitted as a latency plus a cost per robot, and the shares are chosen so that
-all workers finish together (in proportion to their speed when latencies are
-equal; see ``schedule``).  A worker that cannot take more than ``capacity``
-robots (a hardware bridge has one per serial port) gets episodes of at most
-that many, one after another.
-Workers are namespaces, or fnmatch patterns such as ``/worker*`` matched
-against the ROS graph before every batch, so that a worker that appears later
-is used from the next batch.
-
-An episode that stalls (its fitness ``stall_timeout_s`` later than the
-worker's measured speed predicts, or tracing, no new message for that long: a
-node died or stopped answering) or that breaks the protocol (two different
-messages with the same tag, a wrong robot count) is started again under a fresh episode id
-with the same seeds, so the result does not change: on another worker when
-there is one (the failed worker leaves the pool, with a log line, until it
-answers again), else on the same one.  After ``max_retries`` failures of one
-episode the batch fails with ``EpisodeFailed``.  Messages tagged with another
-episode are ignored, so a reading is never paired with the wrong step's command.
-
-It waits in one of two ways: when another thread spins the node's executor
-(the evolution_manager node, a script that spins in the background), on an
-event the callbacks set; when given ``executor``, by spinning it itself.
-"""
+"""``GraphEvaluator``: genomes scored through worker pairs of nodes, the topic counterpart of
+``core.evaluation.CoreEvaluator`` (the same seeds give the same numbers)."""
 from __future__ import annotations
 
 import time
@@ -63,12 +26,24 @@ __all__ = ['GraphEvaluator', 'EpisodeFailed', 'EpisodeIds', 'episode_fitness']
 class GraphEvaluator:
     """``(genomes (n, 20), seeds (n,)) -> fitness (n,)`` through one or more worker pairs.
 
-    ``workers``: namespaces or fnmatch patterns of the pairs; empty: the one pair in
-    ``robot_namespace`` (whose ``controller_node`` and ``robot_node`` may be named).
-    ``capacity``: most robots per episode on any worker (0: no limit but the ``ports``
-    a hardware bridge has).  ``trace``: observe every step (light, cmd_turn, bearing), so
-    that ``trace()`` works and each reported fitness is checked against the messages;
-    off, the evaluator takes one message per episode instead of three per step.
+    Args:
+        node: the node whose publishers, subscriptions and clients talk to the workers.
+        robot_namespace: the one worker's namespace, when ``workers`` is empty.
+        controller_node, robot_node: that worker's node names (default: found in the
+            graph).
+        stall_timeout_s: how long an episode may go without news before it is repeated.
+        max_retries: repeats of one episode before the batch fails with EpisodeFailed.
+        executor: spun by the evaluator while it waits; None when another thread spins
+            ``node``.
+        trace: observe every step (light, cmd_turn, bearing), so that ``trace()`` works
+            and each reported fitness is checked against the messages; off, one message
+            per episode instead of three per step.
+        workers: namespaces or fnmatch patterns (``/worker*``) of the worker pairs.
+        capacity: most robots per episode on any worker (0: no limit but the ``ports`` a
+            hardware bridge has).
+
+    Raises:
+        ValueError: both ``workers`` and ``robot_namespace`` given, or capacity < 0.
     """
 
     def __init__(self, node: Node, robot_namespace: str = '', controller_node: str = '',
@@ -135,6 +110,19 @@ class GraphEvaluator:
     # --- public ------------------------------------------------------------------------
 
     def __call__(self, genomes, seeds) -> np.ndarray:
+        """Score one episode per genome.
+
+        Args:
+            genomes: (n, 20) genomes.
+            seeds: (n,) episode seeds, integers in [0, 2**53).
+
+        Returns:
+            (n,) float64 fitness, equal to ``CoreEvaluator``'s for the same seeds.
+
+        Raises:
+            ValueError: bad genomes or seeds.  EpisodeFailed: an episode failed more than
+            ``max_retries`` times, or no worker is there.
+        """
         genomes, seeds = _batch(genomes, seeds)
         fitness = np.empty(len(seeds))
 
@@ -144,7 +132,17 @@ class GraphEvaluator:
         return fitness
 
     def trace(self, genomes, seeds) -> Trace:
-        """Per-step record of the episodes ``__call__`` would score, robots on axis 1."""
+        """The per-step record of the episodes ``__call__`` would score.
+
+        Args:
+            genomes, seeds: as for ``__call__`` (at least one).
+
+        Returns:
+            A ``core.task.Trace``: arrays (steps, n, ...), robots on axis 1.
+
+        Raises:
+            ValueError: the evaluator was made with ``trace=False``, or no genome.
+        """
         if BEARING not in self._observed:
             raise ValueError('this evaluator was made with trace=False, so it does not see '
                              'the per-step messages a trace needs')
@@ -160,8 +158,18 @@ class GraphEvaluator:
                      np.ascontiguousarray(cmd[..., 0]), np.ascontiguousarray(cmd[..., 1]))
 
     def robot_parameters(self, timeout_s: float = 5.0, worker: Worker | None = None) -> dict:
-        """A robot node's parameters by name (for the record of a run); the first
-        worker's unless ``worker`` is given."""
+        """A robot node's parameters, for the record of a run.
+
+        Args:
+            timeout_s: how long to wait for each answer.
+            worker: whose robot node (default: the first worker's).
+
+        Returns:
+            Parameter name -> plain Python value.
+
+        Raises:
+            TimeoutError: no robot node known yet, or no answer in time.
+        """
         worker = worker or self.first
         robot = worker.robot_client() if worker else None
         if robot is None:
@@ -177,9 +185,14 @@ class GraphEvaluator:
 
     def wait_ready(self, timeout_s: float = 30.0) -> None:
         """Block until every named worker (and, with patterns, at least one that matches)
-        has its robot node and controller connected and answering a parameter request;
-        TimeoutError if none has.  A named worker still missing then is used once it
-        appears (with a warning now)."""
+        has its robot node and controller connected and answering a parameter request.
+
+        A named worker still missing after ``timeout_s`` is used once it appears (with a
+        warning now).
+
+        Raises:
+            TimeoutError: no worker is ready after ``timeout_s``.
+        """
         def ready() -> bool:
             self._discover()
             ready = [w for w in self.workers.values() if w.ready(self.stall_timeout_s)]
