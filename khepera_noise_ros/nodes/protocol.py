@@ -12,37 +12,12 @@ paired across episodes or steps:
   genomes      Float64MultiArray  [episode | B x 20 genes]          manager -> controller
   genomes_loaded Int32            episode                           controller -> manager
 
-``light`` alone is sensor-major (its layout: ``sensors`` 8, then ``robots`` B),
-the order the network consumes: neither end transposes the largest message of
-a step.  ``unpack_light`` still gives ``values`` as (B, 8), a view.
-
-``genomes`` gives the networks for one episode: the controller answers that
-episode's light with them and acknowledges on ``genomes_loaded``, and the
-manager starts the episode only then.  It is the fast path for what the
-controller's ``genomes`` parameter also does (rclpy checks a parameter's
-values one by one in Python: loading 1024 genomes took 7% of an episode).
-
-``fitness`` is published once, when an episode has run all its steps: each
-robot's mean step fitness in [0, 1], summed in float32 as ``core.task.run``
-does from the readings published and the commands applied.  It is what lets
-an evolution manager, possibly on another machine, take one message per
-episode instead of two per step.
-
-Readings are 0 (brightest) .. 525 (darkest); direction is -1 (left) or +1
-(right), power 0..9; seeds are integers in [0, 2**53), start bearings finite
-degrees within +-1e6 (wrapped to one turn).  ``unpack_*`` raise ``Malformed``
-with the reason, whatever the bytes (tested by fuzzing).
-
-``pack_*(..., raw=True)`` gives the message already serialized (little-endian
-CDR, the bytes rclpy would send) and ``unpack_*`` also take such bytes, from a
-subscription made with ``raw=True``: the wire format is the same std_msgs
-message, but the hot path skips building rosidl Python objects, which costs
-more than the numbers themselves (a lockstep step about a quarter faster).
-
-Every lockstep topic uses ``QOS``: reliable, volatile, keep-last 100.  The
-robot-controller loop has one message per topic in flight; the depth lets an
-observer such as the evolution manager lag up to 100 messages behind it
-without losing one (a longer lag shows up as a stalled episode).
+``light`` alone is sensor-major on the wire; ``pack_light`` takes and ``unpack_light``
+gives (B, 8).  Readings are 0 (brightest) .. 525 (darkest), direction -1 or +1, power
+0..9, seeds integers in [0, 2**53), start bearings finite degrees within +-1e6.
+``unpack_*`` raise ``Malformed`` with the reason, whatever the bytes;
+``pack_*(..., raw=True)`` gives serialized bytes, which ``unpack_*`` also take.  The
+reasons for this layout are in docs/architecture.md ("The lockstep messages").
 """
 from __future__ import annotations
 

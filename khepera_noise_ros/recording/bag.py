@@ -1,19 +1,10 @@
 """Recordings as rosbag2 directories with MCAP storage, for ``ros2 bag``, Foxglove, PlotJuggler.
 
-The bag carries the node graph's own topics and message types (see
-``nodes/protocol.py``), one robot per message, so ``ros2 bag play`` feeds a live
-graph or a plotting tool directly:
-
-  light                Float64MultiArray  [episode, step | C x 1 readings], NaN = unknown
-  bearing              Float64MultiArray  [episode, step | 1 x 1 lamp bearing, deg]
-  cmd_turn             Int32MultiArray    [episode, step | 1 x (direction, power)]
-  recording/manifest   String             the YAML manifest, once, first
-  recording/condition  String             ``{episode: E, step: S, condition: LABEL}``,
-                                          from that sample on, whenever the label changes
-
-Sample i is stamped ``start_ns + i * sample_period_s``.  Reading joins the topics
-on (episode, step), never on time, so a bag re-recorded with ``ros2 bag record``
-reads the same.  ``rosbags`` is imported lazily: only bag users need it.
+The bag carries the node graph's own topics (``light``, ``bearing``, ``cmd_turn``), one
+robot per message, plus ``recording/manifest`` (the YAML manifest, once, first) and
+``recording/condition`` (the label from a sample on).  Reading joins the topics on
+(episode, step), never on time, so a bag re-recorded with ``ros2 bag record`` reads the
+same.  ``rosbags`` is imported lazily: only bag users need it.
 """
 from __future__ import annotations
 
