@@ -61,11 +61,9 @@ def spin_node(make_node: Callable[[], Node], args=None,
 
 
 def spin_forever(executor) -> None:
-    """Spin until shutdown.  rclpy's EventsExecutor takes no message from another
-    process in ``spin()`` (this rclpy build); ``spin_until_future_complete`` on a future
-    that never completes does, and, unlike ``spin_once``, stays in its C++ loop between
-    callbacks (a worker pair reached 47-57% of the core at 1024 robots this way, 42-49%
-    with ``spin_once``)."""
+    """Spin ``executor`` until shutdown, on a future that never completes: an
+    EventsExecutor's ``spin()`` takes no message from another process in this rclpy
+    build (docs/architecture.md, ``nodes/runtime.py``)."""
     idle = Future()
     while rclpy.ok():
         executor.spin_until_future_complete(idle, timeout_sec=1.0)
