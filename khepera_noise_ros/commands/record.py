@@ -95,7 +95,8 @@ def start_robot(kind: str, context, args) -> tuple[object, Callable[[], None]]:
     world = EmulatedWorld(EffectsConfig.load(args.effects) if args.effects else None,
                           seed=args.seed)
     if kind == 'emulator-world':
-        return _world_node(world, context), lambda: None
+        from ..nodes.world_node import WorldNode
+        return WorldNode(world, context=context), lambda: None
     from rclpy.parameter import Parameter
 
     from ..nodes.hardware_bridge import HardwareBridge
@@ -117,28 +118,6 @@ def _simulator_overrides(args) -> list:
             Parameter('independent_level', value=float(args.independent)),
             Parameter('dependence_groups', value=args.groups),
             Parameter('distribution', value=args.distribution)]
-
-
-def _world_node(world, context):
-    """A robot node over the emulator's world in this process (no serial link).
-
-    The robot-node geometry parameters place the lamp and set the room, as a
-    hardware bridge declares them to the emulator.
-    """
-    from ..nodes.params import GEOMETRY, world_from
-    from ..nodes.robot_node import RobotNode
-    from ..reality.khepera_robot import InProcessRobots, KheperaRobots
-
-    class InProcessEmulator(RobotNode):
-        def make_backend(self, values):
-            return KheperaRobots(InProcessRobots(world), world_from(values), self.task)
-
-        def apply_parameters(self, values, changed):
-            super().apply_parameters(values, changed)
-            if changed & set(GEOMETRY):
-                self.backend.world = world_from(values)
-
-    return InProcessEmulator('emulator', context=context)
 
 
 # -- the command --------------------------------------------------------------------------
