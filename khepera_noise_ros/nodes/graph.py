@@ -265,11 +265,11 @@ class GraphEvaluator:
         if live:
             return live
         # none ready: try the ones still joining anyway
-        alive = [w for w in self.workers.values() if w.state is WorkerState.JOINING]
-        if not alive:
+        joining = [w for w in self.workers.values() if w.state is WorkerState.JOINING]
+        if not joining:
             raise EpisodeFailed(f'no worker matches {self.patterns}: no node publishes '
                                 f'<namespace>/{LIGHT} in a matching namespace')
-        return alive
+        return joining
 
     def _share(self, chunk: Chunk, workers: list[Worker]) -> None:
         """Queue ``chunk`` on ``workers`` by their measured cost, cut to their capacity.  A
