@@ -13,10 +13,10 @@ from rclpy.parameter import parameter_value_to_python
 from ..core.network import GENES, check_genomes
 from ..core.task import Trace
 from . import protocol, schedule
-from .dropped import Dropped
-from .protocol import BEARING, CMD_TURN, LIGHT
 from .discovery import discover, is_pattern
+from .dropped import Dropped
 from .episode import Chunk, Episode, EpisodeFailed, EpisodeIds, episode_fitness
+from .protocol import BEARING, CMD_TURN, LIGHT
 from .wake import Wake
 from .workers import DONE, TOO_LARGE, Worker, WorkerState
 
