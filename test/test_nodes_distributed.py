@@ -24,6 +24,7 @@ from khepera_noise_ros.nodes.runtime import events_executor, spinning
 from khepera_noise_ros.nodes.params import Spec, overrides
 from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.nodes.discovery import discover
+from khepera_noise_ros.nodes.episode import Chunk
 from khepera_noise_ros.nodes.workers import WorkerState
 from nodes_fixtures import controller, manager, simulator, wait_for
 
@@ -236,3 +237,26 @@ def test_worker_pair_refuses_an_unknown_argument(capsys):
     assert worker_pair.main(['worker_pair', '--simulator']) == 2
     assert "unknown argument(s) ['--simulator']; usage: worker_pair [--bridge]" in \
         capsys.readouterr().err
+
+
+def test_a_worker_joins_when_its_pair_answers_leaves_on_drop_and_comes_back(ros_context):
+    """JOINING until both nodes of the pair are connected and have answered a parameter
+    request; LOST (with its chunks handed back) when dropped, however it answers; back
+    READY once it answers again while its robot node listens."""
+    evaluator_node = Node('evaluator', context=ros_context)
+    worker = GraphEvaluator(evaluator_node, robot_namespace='/w').first
+    assert worker.state is WorkerState.JOINING
+    assert not worker.check_joined(0.5) and worker.state is WorkerState.JOINING   # no pair
+    ns = ['--ros-args', '-r', '__ns:=/w']
+    pair = [simulator(ros_context, cli_args=ns), controller(ros_context, cli_args=ns)]
+    with spinning([evaluator_node, *pair], ros_context):
+        assert wait_for(lambda: worker.check_joined(0.5), timeout=20)
+        assert worker.state is WorkerState.READY
+        assert not worker.check_joined(0.5)                # already READY: no news
+        worker.queue.append(Chunk(0, 3))
+        assert worker.drop('test') == [Chunk(0, 3)] and worker.state is WorkerState.LOST
+        assert not worker.check_joined(0.5) and worker.state is WorkerState.LOST
+        assert worker.record()['dropped'] == 'test'
+        assert wait_for(lambda: worker.answers(0.5), timeout=20)
+        worker.rejoin()
+        assert worker.state is WorkerState.READY and worker.record()['dropped'] is None

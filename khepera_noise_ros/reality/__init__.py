@@ -2,9 +2,9 @@
 robot, and the hardware bridge's backend.
 
 ``serial_protocol`` formats and strictly parses the robot's ASCII commands; ``effects`` are
-the physical processes the emulated robot has and the simulator does not model (configured
-from YAML, names from the DESIGN.md vocabulary); ``world`` is the emulated world, pure numpy;
-``emulator`` serves it on pseudo-terminals; ``khepera_robot`` runs the light-centring episode
-on robots over serial ports (or in-process over a world).  Nothing here uses the simulator's
-noise model (``core.noise``).
+the physical processes the emulated robot has and the simulator does not model; ``world`` is
+the emulated world, pure numpy; ``emulator`` serves it on pseudo-terminals;
+``khepera_robot`` runs the light-centring episode on robots, ``serial_robots`` and
+``serial_link`` reach them over serial ports (``InProcessRobots`` over a world, without
+one).  Nothing here uses the simulator's noise model (``core.noise``).
 """
