@@ -22,12 +22,14 @@ ROS_STATIC_PEERS) says otherwise.
 """
 from __future__ import annotations
 
+import functools
 import os
 import sys
 
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from . import spin_forever
@@ -43,8 +45,9 @@ def robot_class(argv: list[str]):
     if extra not in ([], ['--bridge']):
         raise ValueError(f'unknown argument(s) {extra}; {USAGE}')
     if extra:
-        from .hardware_bridge import HardwareBridge
-        return HardwareBridge
+        from .hardware_bridge import HardwareBridge     # serving at once, as a simulator
+        return functools.partial(HardwareBridge, parameter_overrides=[
+            Parameter('autostart', value=True)])
     from .simulator import Simulator
     return Simulator
 
