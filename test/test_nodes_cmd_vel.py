@@ -3,11 +3,13 @@ refused or clipped, counted, and the node keeps running."""
 import math
 import threading
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Twist
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from khepera_noise_ros.nodes import protocol
+from khepera_noise_ros.nodes.diagnostics import DropReport
 from khepera_noise_ros.nodes.graph import spinning
 from nodes_fixtures import simulator, wait_for
 
@@ -88,6 +90,13 @@ def test_bad_cmd_vel_values_are_refused_or_clipped_and_counted(ros_context):
         assert drive_and_watch(teleop, UNIT, x=0.2) == [-3.0] * 6       # linear: ignored
         assert sim.view.refused['ignored'] == 1
         assert sim.drop_counts()['cmd_vel_refused'] == 3
+        (report,) = sim.diagnostics.publish().status          # what /diagnostics carries
+        counts = {kv.key: kv.value for kv in report.values}
+        assert report.name == '/simulator: messages'
+        assert counts['cmd_vel_refused'] == '3' and counts['cmd_vel_clipped'] == '1'
+        fresh = DropReport(sim, sim.drop_counts)          # as if no report was made yet
+        assert fresh().level == DiagnosticStatus.WARN     # grew since the last report
+        assert fresh().level == DiagnosticStatus.OK
 
 
 def test_cmd_vel_is_refused_in_lockstep_and_for_many_robots(ros_context):
