@@ -25,6 +25,7 @@ from std_msgs.msg import Float64MultiArray, Int32, Int32MultiArray
 
 from ..core import network
 from . import Dropped, protocol, spin_node
+from .diagnostics import Diagnostics, DropReport
 from .params import Spec, declare, proposed
 
 GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: one network per '
@@ -54,6 +55,7 @@ class Controller(Node):
         super().__init__(node_name, **kwargs)
         declare(self, [GENOMES])
         self.dropped = Dropped(self)
+        self.diagnostics = Diagnostics(self, [DropReport(self, lambda: dict(self.dropped))])
         self._weights = self._load(self.get_parameter(GENOMES.name).value)
         self._tagged: dict[int, network.Weights] = {}       # episode -> its networks
         self._running: int | None = None        # the episode of the last light answered
