@@ -1,4 +1,4 @@
-"""Recordings in the public format (DESIGN.md): CSV plus YAML manifest, and rosbag2 (MCAP).
+"""Recordings in the public format (docs/recordings.md): CSV + YAML manifest, rosbag2 (MCAP).
 
 The in-memory form is ``Recording``: one row per sample.  A Khepera file has
 exactly the version-1 columns; a board with C != 8 light channels extends

@@ -1,7 +1,7 @@
 """A worker pair in one process: a robot node and its controller on one executor.
 
 An evolution manager with several ``workers`` drives one such pair per
-namespace (see the README, "Distributed evaluation"), on this machine or on others in the same
+namespace (see docs/distributed.md), on this machine or on others in the same
 ROS domain:
 
     python -m khepera_noise_ros.nodes.worker_pair --ros-args -r __ns:=/w0 \\
@@ -12,7 +12,7 @@ ROS domain:
 The robot node is a simulator, or with ``--bridge`` a hardware bridge; both
 are the ordinary nodes with their ordinary parameters.  Two choices make a pair
 about twice as fast as the two nodes in processes of their own (see
-the README, "Distributed evaluation"): the light -> controller -> cmd_turn round trip of every
+docs/distributed.md): the light -> controller -> cmd_turn round trip of every
 step stays inside the process, and the executor is rclpy's EventsExecutor,
 which costs a fraction of the SingleThreadedExecutor per callback.  It is
 driven by ``spin_forever``: in this rclpy build its ``spin()`` takes no message
