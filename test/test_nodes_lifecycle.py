@@ -104,3 +104,22 @@ def test_autostart_configures_and_activates(ros_context):
         finally:
             node.destroy_node()
         assert em.served(0)['B'] == 1
+
+
+def test_the_active_bridge_publishes_illuminance_of_unknown_variance(ros_context):
+    """The bridge's conventional view: robot 0's readings in their sensor frames, variance
+    0 (unknown: there is no noise model of the real robot)."""
+    from test_nodes_illuminance import Listener
+    with Emulator(EmulatedWorld(seed=2, robots=2)) as em:
+        node = bridge(ros_context, em.ports, autostart=True)
+        probe, listener = Probe(ros_context), Listener(ros_context, namespace='/')
+        with spinning([node, probe, listener], ros_context):
+            assert probe.connected(protocol.EPISODE_START)
+            assert wait_for(node.view.wanted)
+            probe.publish(protocol.EPISODE_START, protocol.pack_episode_start(5, [1, 2]))
+            (light,) = probe.wait_light(5, 0)
+            assert wait_for(lambda: len(listener.steps()) == 1)
+            (messages,) = listener.steps().values()
+    assert [m.header.frame_id for m in messages] == [f'light_sensor_{n}' for n in range(8)]
+    assert [m.illuminance for m in messages] == list(525.0 - light.values[0])
+    assert [m.variance for m in messages] == [0.0] * 8
