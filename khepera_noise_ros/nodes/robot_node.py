@@ -27,9 +27,13 @@ episode (``end_episode``): nothing of it is resent, and its commands are
 dropped as another episode's; the node keeps running.
 
 Real time: a timer at ``rate_hz`` steps the robots with the latest command
-received for the current episode (no command: no turn), like a physical robot
-that does not wait.  Episodes follow one another; ``episode_start`` still
-starts one with given seeds.
+received for the current episode (no command: a fresh ``cmd_vel``'s turn, else
+no turn), like a physical robot that does not wait.  Episodes follow one
+another; ``episode_start`` still starts one with given seeds.
+
+Beside this protocol, ``robot_view`` gives robot 0 the conventional topics
+(Illuminance per sensor, sensor frames, cmd_vel), and ``diagnostics`` reports
+the drop counts on /diagnostics.
 """
 from __future__ import annotations
 
