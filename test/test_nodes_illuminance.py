@@ -3,6 +3,7 @@ received by a node that subscribes like any other."""
 import threading
 
 import numpy as np
+import pytest
 from rclpy.node import Node
 from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64MultiArray
@@ -92,3 +93,45 @@ def test_in_lockstep_illuminance_is_published_only_while_someone_subscribes(ros_
                         if b.episode == 4]
             np.testing.assert_array_equal([m.illuminance for m in messages],
                                           DARK - light.values[0])
+
+
+def test_static_transforms_name_base_link_and_each_sensor_frame(ros_context, monkeypatch):
+    """/tf_static needs tf2_msgs, which has no wheel: a stand-in TFMessage shows what the
+    node would publish (geometry_msgs transforms, REP 105 names, REP 103 yaw)."""
+    import math
+    import sys
+    import types
+
+    from khepera_noise_ros.core.frames import sensor_poses
+    from khepera_noise_ros.nodes.robot_view import static_transforms
+
+    class TFMessage:
+        def __init__(self, transforms):
+            self.transforms = transforms
+    fake = types.ModuleType('tf2_msgs')
+    fake.msg = types.SimpleNamespace(TFMessage=TFMessage)
+    monkeypatch.setitem(sys.modules, 'tf2_msgs', fake)
+    monkeypatch.setitem(sys.modules, 'tf2_msgs.msg', fake.msg)
+    node = Node('frames', context=ros_context)
+    try:
+        msg = static_transforms(node, 'r2/', 0.03, 0.01)
+    finally:
+        node.destroy_node()
+    assert [t.header.frame_id for t in msg.transforms] == ['r2/base_link'] * 8
+    assert [t.child_frame_id for t in msg.transforms] == [p.frame for p in sensor_poses('r2/')]
+    for t, pose in zip(msg.transforms, sensor_poses('r2/', 0.03, 0.01)):
+        assert (t.transform.translation.x, t.transform.translation.y,
+                t.transform.translation.z) == (pose.x, pose.y, 0.01)
+        yaw = 2 * math.atan2(t.transform.rotation.z, t.transform.rotation.w)
+        assert yaw == pytest.approx(pose.yaw)
+
+
+def test_without_tf2_msgs_there_are_no_static_transforms(ros_context, monkeypatch):
+    import sys
+    from khepera_noise_ros.nodes.robot_view import static_transforms
+    monkeypatch.setitem(sys.modules, 'tf2_msgs', None)      # import fails
+    node = Node('frames', context=ros_context)
+    try:
+        assert static_transforms(node, '', 0.03, 0.01) is None
+    finally:
+        node.destroy_node()
