@@ -99,3 +99,16 @@ def test_variance_matches_the_spread_of_sampled_readings(distribution):
     measured = samples.var(axis=0)
     predicted = reading_variance(base, noise) - QUANTISATION
     assert measured == pytest.approx(predicted, rel=0.03)
+
+
+def test_the_conversions_are_pure():
+    """The modules behind the ROS conventions import no rclpy and no message types."""
+    import subprocess
+    import sys
+    code = ('import sys; import khepera_noise_ros.core.frames, khepera_noise_ros.core.twist, '
+            'khepera_noise_ros.core.illuminance; '
+            'print(sorted(m for m in sys.modules if m.startswith(("rclpy", "sensor_msgs", '
+            '"geometry_msgs", "std_msgs"))))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == '[]'

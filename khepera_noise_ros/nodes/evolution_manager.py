@@ -394,7 +394,11 @@ class EvolutionManager(Node):
     def _worker_health(self) -> list:
         """One status per worker pair: OK while it is in the pool, WARN once dropped."""
         statuses = []
-        for record in self.evaluator.worker_records():
+        try:
+            records = self.evaluator.worker_records()
+        except RuntimeError:                # the pool changed under us: report next time
+            return statuses
+        for record in records:
             left = record['dropped']
             statuses.append(status(
                 f"{self.get_fully_qualified_name()}: worker {record['namespace'] or '/'}",
