@@ -13,13 +13,17 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     python_requires='>=3.10',
     install_requires=['setuptools', 'numpy', 'scipy', 'matplotlib', 'pyyaml', 'pyserial',
                       'tqdm'],
     extras_require={
-        # ROS 2 from PyPI wheels, for machines without a sourced ROS 2 install.
-        'wheels': ['ros-rclpy[fastrtps]', 'ros-std-msgs', 'ros-sensor-msgs'],
+        # ROS 2 from PyPI wheels, for machines without a sourced ROS 2 install: every
+        # message and service package the nodes import (tf2_msgs and launch have no wheel).
+        'wheels': ['ros-rclpy[fastrtps]', 'ros-std-msgs', 'ros-sensor-msgs',
+                   'ros-geometry-msgs', 'ros-diagnostic-msgs', 'ros-std-srvs',
+                   'ros-rcl-interfaces', 'ros-lifecycle-msgs'],
         # rosbag2 (MCAP) recordings without the ROS C++ stack.
         'bags': ['rosbags'],
         'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8'],

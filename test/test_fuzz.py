@@ -557,7 +557,8 @@ def test_fuzzing_the_hardware_bridge_during_evaluations_changes_nothing():
     with ros_domain() as context:
         bridge = HardwareBridge(context=context, backend=backend, parameter_overrides=overrides(
             HardwareBridge.parameter_specs(), {'steps': STEPS, 'resend_timeout_s': 0.05,
-                                               'ports': ['/dev/null'] * ROBOTS}))
+                                               'ports': ['/dev/null'] * ROBOTS,
+                                               'autostart': True}))
         ctrl = Controller(context=context, parameter_overrides=overrides([GENOMES], {}))
         mgr = EvolutionManager(context=context, parameter_overrides=overrides(
             MANAGER_SPECS, {'results_path': '', 'stall_timeout_s': 5.0}))

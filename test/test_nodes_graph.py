@@ -309,7 +309,7 @@ def test_tagged_genomes_answer_their_episode_and_the_running_one_is_kept(ros_con
 
 
 class ParameterOnlyController(Controller):
-    """A controller written to DESIGN.md's interface alone: no genomes topic."""
+    """A controller written to the version-1 interface alone: no genomes topic."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

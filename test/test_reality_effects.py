@@ -21,11 +21,9 @@ def corr(x, a, b):
 # --- configuration ---------------------------------------------------------------------
 
 def test_effect_names_are_the_design_vocabulary():
-    design = (ROOT.parent / 'shared' / 'DESIGN.md')
-    names = set(EFFECTS) | {'none'}
-    if design.exists():
-        for name in names:
-            assert f'`{name}`' in design.read_text()
+    design = (ROOT / 'docs' / 'design.md').read_text()
+    for name in set(EFFECTS) | {'none'}:
+        assert f'`{name}`' in design
     assert set(effects.EFFECT_TYPES) == set(EFFECTS) and len(EFFECTS) == 7
 
 

@@ -23,7 +23,8 @@ WORLD_SEED = 11
 
 
 def bridge(context, ports, **values):
-    values = {'ports': list(ports), 'steps': STEPS, 'timeout_s': 2.0, 'retries': 1, **values}
+    values = {'ports': list(ports), 'steps': STEPS, 'timeout_s': 2.0, 'retries': 1,
+              'autostart': True, **values}
     return HardwareBridge(context=context, parameter_overrides=overrides(
         HardwareBridge.parameter_specs(), values))
 

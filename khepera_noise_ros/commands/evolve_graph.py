@@ -5,7 +5,7 @@ The nodes read their parameters from --params-file (a ROS 2 parameter file such
 as config/sim_comb5.yaml, with a section per node); the options below override
 it.  The result equals the core's evolution (core.evolution with
 CoreEvaluator; trial i with the EA seed seed + i), and the JSON record is the
-evolution_manager's.  the README ("The ROS 2 node graph") shows how to run the same nodes as
+evolution_manager's.  docs/nodes.md shows how to run the same nodes as
 separate processes.
 """
 from __future__ import annotations

@@ -104,7 +104,7 @@ def start_robot(kind: str, context, args) -> tuple[object, Callable[[], None]]:
     emulator = Emulator(world, seed=args.seed).start()
     try:
         bridge = HardwareBridge(context=context, parameter_overrides=[
-            Parameter('ports', value=emulator.ports[:1])])
+            Parameter('ports', value=emulator.ports[:1]), Parameter('autostart', value=True)])
     except BaseException:
         emulator.stop()
         raise

@@ -303,7 +303,8 @@ class _Ros:
         from ..nodes.hardware_bridge import HardwareBridge
         from ..nodes.params import overrides
         namespace = f'{self.prefix}/reality'
-        values = {**config.data['task'], **config.data['world'], 'ports': list(ports)}
+        values = {**config.data['task'], **config.data['world'], 'ports': list(ports),
+                  'autostart': True}
         if timeout_s is not None:
             values['timeout_s'] = timeout_s
         self._add(HardwareBridge(context=self.context, namespace=namespace,

@@ -1,4 +1,4 @@
-"""Simulator-side models of the unmodelled effects, one per name of DESIGN.md's vocabulary.
+"""Simulator-side models of the unmodelled effects, one per name of the effect vocabulary.
 
 Each effect is a small physical process the simulator can add to the paper's
 model.  Light-stage effects change the light level a sensor sees before the

@@ -27,6 +27,7 @@ from ..core import network
 from . import protocol
 from .dropped import Dropped
 from .runtime import spin_node
+from .diagnostics import Diagnostics, DropReport
 from .params import Spec, declare, proposed
 
 GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: one network per '
@@ -56,6 +57,7 @@ class Controller(Node):
         super().__init__(node_name, **kwargs)
         declare(self, [GENOMES])
         self.dropped = Dropped(self)
+        self.diagnostics = Diagnostics(self, [DropReport(self, lambda: dict(self.dropped))])
         self._weights = self._load(self.get_parameter(GENOMES.name).value)
         self._tagged: dict[int, network.Weights] = {}       # episode -> its networks
         self._running: int | None = None        # the episode of the last light answered

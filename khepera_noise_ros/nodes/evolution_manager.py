@@ -8,8 +8,11 @@ worker pairs ``workers`` names, and fitness is computed from the readings and
 commands seen on the topics.  ``trials`` independent runs evolve together, so
 each lockstep step carries one robot per trial; trial i uses the EA seed
 ``seed + i``.  It publishes the best fitness of every generation on
-``best_fitness``, checkpoints after every generation (a restarted manager
-resumes where it stopped; see ``checkpoint``) and writes a JSON record at the end.
+``best_fitness`` (transient local, depth 1: a late subscriber gets the latest),
+checkpoints after every generation (a restarted manager resumes where it
+stopped; see ``checkpoint``) and writes a JSON record at the end.  The ``~/stop``
+service (std_srvs/Trigger) ends a run cleanly after the generation in progress
+and its checkpoint; worker health goes on ``/diagnostics``.
 With the same seeds the result equals core.evolution with CoreEvaluator,
 whatever the number of workers and however often the run was interrupted.
 """
@@ -28,8 +31,10 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.task import Future
 from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
 
 from ..core.evolution import BEST_MODES, FITNESS_MODES, PHASE1, PHASE2, EAConfig, \
     SteadyStateEA, evolve
@@ -37,12 +42,20 @@ from ..core.network import GENES, check_genomes
 from ..files import write_json
 from .runtime import spin_node
 from .checkpoint import Checkpoint, checkpoint_path
+from .diagnostics import Diagnostics, DropReport, OK, status, WARN
 from .graph import GraphEvaluator
 from .params import SEED_MAX, Spec, check_choice, current, declare, proposed
 from .discovery import is_pattern
 
 FORMAT = 'khepera-noise-evolution/1'
 BEST_FITNESS = 'best_fitness'
+BEST_FITNESS_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STOP = '~/stop'
+
+
+class EvolutionStopped(Exception):
+    """A stop was asked for: the run ends after its generation's checkpoint."""
+
 
 MANAGER_SPECS = (
     Spec('phase', 1, 'Phase of the paper: 1 = population 25, 50 generations, random start; '
@@ -172,7 +185,11 @@ class EvolutionManager(Node):
             self, stall_timeout_s=v['stall_timeout_s'], max_retries=v['max_retries'],
             trace=trace, workers=list(v['workers']), capacity=v['worker_capacity'],
             **single)
-        self._best_pub = self.create_publisher(Float64, BEST_FITNESS, 10)
+        self._best_pub = self.create_publisher(Float64, BEST_FITNESS, BEST_FITNESS_QOS)
+        self._stop = threading.Event()
+        self.create_service(Trigger, STOP, self._on_stop)
+        self.diagnostics = Diagnostics(self, [
+            DropReport(self, lambda: dict(self.evaluator.dropped)), self._worker_health])
         self.results: dict | None = None
         self.finished: Future | None = None
         self._worker: threading.Thread | None = None
@@ -228,6 +245,7 @@ class EvolutionManager(Node):
         if self._worker is not None and self._worker.is_alive():
             raise RuntimeError('an evolution is already running')
         self.finished = Future()
+        self._stop.clear()
         self._worker = threading.Thread(target=self._run_into, args=(self.finished,),
                                         daemon=True)
         self._worker.start()
@@ -258,8 +276,16 @@ class EvolutionManager(Node):
         self._published = 0
         self._counts = (self.evaluator.episodes, self.evaluator.restarts)
         evaluate = self.evaluator if checkpoint is None else checkpoint.evaluator(self.evaluator)
-        evolve(eas, evaluate,
-               progress=lambda eas: self._progress(eas, checkpoint, started))
+        try:
+            evolve(eas, evaluate,
+                   progress=lambda eas: self._progress(eas, checkpoint, started))
+        except EvolutionStopped as stopped:
+            self._stop.clear()
+            where = 'no checkpoint' if checkpoint is None else f'checkpoint {checkpoint.path}'
+            self.get_logger().warning(f'evolution stopped on request after generation '
+                                      f'{stopped.args[0]}; {where}')
+            return {'stopped': True, 'generation': stopped.args[0],
+                    'checkpoint': None if checkpoint is None else str(checkpoint.path)}
         self.results = self._record(v, config, eas, robot, self._wall_time(started),
                                     checkpoint)
         if v['results_path']:
@@ -345,6 +371,41 @@ class EvolutionManager(Node):
             checkpoint.save(generation=done - 1,
                             history=[[asdict(g) for g in ea.history] for ea in eas],
                             episodes=self._episodes(), wall_time_s=self._wall_time(started))
+        if self._stop.is_set() and done <= eas[0].config.generations:
+            raise EvolutionStopped(done - 1)
+
+    # --- the stop service and /diagnostics ------------------------------------------------
+
+    def _on_stop(self, request: Trigger.Request, response: Trigger.Response
+                 ) -> Trigger.Response:
+        """Ask the run to end after the generation in progress (and its checkpoint)."""
+        if self._worker is None or not self._worker.is_alive():
+            response.success, response.message = False, 'no evolution is running'
+            return response
+        self._stop.set()
+        path = checkpoint_path(self.values['results_path'], self.values['checkpoint_path'])
+        response.success = True
+        response.message = ('stopping after the generation in progress; ' + (
+            f'its checkpoint is {path} (start again to resume)' if path else
+            'no checkpoint is configured, so a new start begins afresh'))
+        self.get_logger().info(response.message)
+        return response
+
+    def _worker_health(self) -> list:
+        """One status per worker pair: OK while it is in the pool, WARN once dropped."""
+        statuses = []
+        try:
+            records = self.evaluator.worker_records()
+        except RuntimeError:                # the pool changed under us: report next time
+            return statuses
+        for record in records:
+            left = record['dropped']
+            statuses.append(status(
+                f"{self.get_fully_qualified_name()}: worker {record['namespace'] or '/'}",
+                WARN if left else OK, f'left the pool: {left}' if left else 'in the pool',
+                {k: record[k] for k in ('robot_node', 'controller_node', 'episodes',
+                                        'robots', 'failures', 'robot_steps_per_s')}))
+        return statuses
 
     def _episodes(self) -> dict:
         """Episodes started and restarted by this run (and those of the runs it resumes)."""

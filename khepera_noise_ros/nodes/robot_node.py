@@ -27,9 +27,13 @@ episode (``end_episode``): nothing of it is resent, and its commands are
 dropped as another episode's; the node keeps running.
 
 Real time: a timer at ``rate_hz`` steps the robots with the latest command
-received for the current episode (no command: no turn), like a physical robot
-that does not wait.  Episodes follow one another; ``episode_start`` still
-starts one with given seeds.
+received for the current episode (no command: a fresh ``cmd_vel``'s turn, else
+no turn), like a physical robot that does not wait.  Episodes follow one
+another; ``episode_start`` still starts one with given seeds.
+
+Beside this protocol, ``robot_view`` gives robot 0 the conventional topics
+(Illuminance per sensor, sensor frames, cmd_vel), and ``diagnostics`` reports
+the drop counts on /diagnostics.
 """
 from __future__ import annotations
 
@@ -47,8 +51,10 @@ from ..core.khepera import DARK, SENSORS
 from ..core.task import Task, step_fitness
 from . import protocol
 from .dropped import Dropped
+from .diagnostics import Diagnostics, DropReport
 from .params import (GEOMETRY_SPECS, TASK_SPECS, Spec, check_choice, current, declare,
                      proposed, task_from, world_from)
+from .robot_view import VIEW_SPECS, RobotView
 
 MODES = ('lockstep', 'realtime')
 MAX_RESENDS = 10
@@ -110,13 +116,16 @@ class RobotNode(Node):
                                  self._on_episode_start, protocol.QOS, raw=True)
         self.create_subscription(Int32MultiArray, protocol.CMD_TURN, self._on_cmd_turn,
                                  protocol.QOS, raw=True)
+        self.view = RobotView(self)
+        self.diagnostics = Diagnostics(self, [DropReport(self, self.drop_counts,
+                                                         self.hardware_id)])
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
         self._start_timer()
 
     @classmethod
     def parameter_specs(cls) -> tuple[Spec, ...]:
-        return ROBOT_SPECS + cls.EXTRA_SPECS
+        return ROBOT_SPECS + VIEW_SPECS + cls.EXTRA_SPECS
 
     # --- hooks for subclasses -----------------------------------------------------------
 
@@ -140,6 +149,18 @@ class RobotNode(Node):
     def realtime_episode(self, count: int) -> tuple[int, int]:
         """(seed, robots) of the count-th episode the real-time mode starts by itself."""
         return count, 1
+
+    def reading_noise(self):
+        """The noise model the readings carry, for their variance; None: unknown."""
+        return None
+
+    def hardware_id(self) -> str:
+        """What /diagnostics names as the hardware behind this node."""
+        return ''
+
+    def drop_counts(self) -> dict[str, int]:
+        """Messages dropped by kind, cmd_vel refusals included (for /diagnostics)."""
+        return {**self.dropped, **{f'cmd_vel_{k}': n for k, n in self.view.refused.items()}}
 
     def end_episode(self, reason: str, error: bool = False) -> None:
         """Forget the current episode, logging ``reason``: its last messages are not resent
@@ -268,6 +289,8 @@ class RobotNode(Node):
         for pub, msg in self._last:
             pub.publish(msg)
         self._last_sent, self._resends = time.monotonic(), 0
+        if readings is not None:
+            self.view.publish(readings, self.reading_noise())
 
     def _resend(self) -> None:
         with self._lock:
@@ -294,11 +317,15 @@ class RobotNode(Node):
                 self._start(count % protocol.MAX_EPISODE, seed, None, robots)
                 return
             batch, self._pending_cmd = self._pending_cmd, None
-            if batch is None:               # no command this tick: no turn
-                self._step(np.column_stack([np.ones(self._robots, np.int32),
-                                            np.zeros(self._robots, np.int32)]))
-            else:
-                self._step(batch.values)
+            self._step(self._idle_command() if batch is None else batch.values)
+
+    def _idle_command(self) -> np.ndarray:
+        """No cmd_turn this tick: a fresh cmd_vel's turn, else no turn."""
+        command = self.view.command() if self._robots == 1 else None
+        if command is not None:
+            return command
+        return np.column_stack([np.ones(self._robots, np.int32),
+                                np.zeros(self._robots, np.int32)])
 
 
 def _check_readings(readings) -> None:

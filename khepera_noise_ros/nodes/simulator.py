@@ -95,6 +95,11 @@ class Simulator(RobotNode):
     def realtime_episode(self, count: int) -> tuple[int, int]:
         return (self.values['seed'] + count) % (SEED_MAX + 1), self.values['robots']
 
+    def reading_noise(self) -> NoiseModel:
+        """The model's noise (the variance leaves the effects out)."""
+        noise = self.backend.noise
+        return getattr(noise, 'model_noise', noise)
+
 
 def main(args=None) -> int:
     return spin_node(Simulator, args)

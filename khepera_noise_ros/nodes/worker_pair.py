@@ -1,7 +1,7 @@
 """A worker pair in one process: a robot node and its controller on one executor.
 
 An evolution manager with several ``workers`` drives one such pair per
-namespace (see the README, "Distributed evaluation"), on this machine or on others in the same
+namespace (see docs/distributed.md), on this machine or on others in the same
 ROS domain:
 
     python -m khepera_noise_ros.nodes.worker_pair --ros-args -r __ns:=/w0 \\
@@ -12,7 +12,7 @@ ROS domain:
 The robot node is a simulator, or with ``--bridge`` a hardware bridge; both
 are the ordinary nodes with their ordinary parameters.  Two choices make a pair
 about twice as fast as the two nodes in processes of their own (see
-the README, "Distributed evaluation"): the light -> controller -> cmd_turn round trip of every
+docs/distributed.md): the light -> controller -> cmd_turn round trip of every
 step stays inside the process, and the executor is rclpy's EventsExecutor,
 which costs a fraction of the SingleThreadedExecutor per callback.  It is
 driven by ``spin_forever``: in this rclpy build its ``spin()`` takes no message
@@ -22,12 +22,14 @@ ROS_STATIC_PEERS) says otherwise.
 """
 from __future__ import annotations
 
+import functools
 import os
 import sys
 
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from .controller import Controller
@@ -42,8 +44,9 @@ def robot_class(argv: list[str]):
     if extra not in ([], ['--bridge']):
         raise ValueError(f'unknown argument(s) {extra}; {USAGE}')
     if extra:
-        from .hardware_bridge import HardwareBridge
-        return HardwareBridge
+        from .hardware_bridge import HardwareBridge     # serving at once, as a simulator
+        return functools.partial(HardwareBridge, parameter_overrides=[
+            Parameter('autostart', value=True)])
     from .simulator import Simulator
     return Simulator
 

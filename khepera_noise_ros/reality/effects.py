@@ -19,8 +19,8 @@ and, on the wheels, ``actuator_turn_error``: a turn's rotation differs from the
 one commanded by a scale (wheel slip on the floor) and a random part.
 
 Every effect has ``enabled`` and ``strength`` and, where it makes sense, a
-``location`` (sensors, or groups of sensors); the names are the DESIGN.md
-vocabulary.  ``EffectsConfig`` is loaded from and saved to YAML; a bad value is
+``location`` (sensors, or groups of sensors); the names are the effect
+vocabulary (docs/design.md).  ``EffectsConfig`` is loaded from and saved to YAML; a bad value is
 a ValueError naming its key.  Randomness arrives as a fixed block of standard
 normal draws per robot and sample (``DRAWS``), so switching an effect on or
 off never changes the draws another effect sees.

@@ -1,0 +1,1 @@
+"""Maintenance tools: ``param_docs`` writes docs/parameters.md from the nodes' descriptors."""
