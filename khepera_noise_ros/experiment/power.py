@@ -168,6 +168,23 @@ def largest_sd(difference: float, n: int, alpha: float = ALPHA,
     return difference / minimum_detectable_difference(1.0, n, alpha, target)
 
 
+def significant_below(difference: float, n: int, alpha: float = ALPHA) -> float:
+    """The largest pooled SD at which an observed ``difference`` between two groups of ``n``
+    is significant at ``alpha`` (two-sided; Welch's df are at most 2n - 2, so this bounds it).
+
+    Args:
+        difference: the observed difference of means.
+        n: trials per group.
+        alpha: two-sided significance level.
+
+    Returns:
+        |difference| / (t(1 - alpha/2, 2n - 2) * sqrt(2/n)).
+    """
+    difference = abs(_check('difference', difference, -math.inf))
+    n, alpha = _trials('n', n), _check('alpha', alpha, 0.0, 1.0)
+    return difference / (float(stats.t.ppf(1 - alpha / 2, 2 * n - 2)) * math.sqrt(2 / n))
+
+
 def plan(sd: float, n: int, difference: float = PAPER_DIFFERENCE, alpha: float = ALPHA,
          target: float = TARGET_POWER, source: str = 'assumed') -> Plan:
     """The power analysis of one design (equal SDs and trials in both models).

@@ -51,7 +51,7 @@ def judge(comparison: Comparison, reference: float | None = None,
             "later"/"sooner" for generations).
         digits: decimals of the numbers in the text.
         reference_name: how the reference is called; default "the paper's X" when a
-            reference is given, else "a difference of X".
+            reference is given, else "a difference of +margin".
 
     Returns:
         A ``Verdict`` by the rules of this module's docstring.
@@ -64,7 +64,7 @@ def judge(comparison: Comparison, reference: float | None = None,
                        f'no test: every trial within each model scored the same '
                        f'({c.a.mean:.{digits}f} vs {c.b.mean:.{digits}f})', True)
     if reference_name is None:
-        reference_name = (f'a difference of {eq.margin:.{digits}f}' if reference is None
+        reference_name = (f'a difference of {eq.margin:+.{digits}f}' if reference is None
                           else f"the paper's {reference:.{digits}f}")
     if reference is None:
         reference = eq.margin
