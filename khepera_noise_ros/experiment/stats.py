@@ -56,7 +56,8 @@ class Interval:
 
 @dataclass(frozen=True)
 class EffectSize:
-    """Hedges' g: the difference in pooled SDs, small-sample corrected, with its CI."""
+    """Hedges' g: the difference in pooled SDs, small-sample corrected; the exact CI of the
+    population's standardized difference (delta)."""
 
     g: float
     ci_low: float
@@ -117,6 +118,11 @@ def _pair(a, b, what: str) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
+def _constant(x: np.ndarray) -> bool:
+    """Every value the same (tested exactly: a variance can keep a rounding residue)."""
+    return bool(np.ptp(x) == 0)
+
+
 def _level(name: str, value: float) -> float:
     if not 0 < value < 1:
         raise ValueError(f'{name} must be between 0 and 1, got {value!r}')
@@ -126,10 +132,10 @@ def _level(name: str, value: float) -> float:
 def summarize(values, confidence: float = CONFIDENCE) -> Summary:
     """Mean, SD and the ``confidence`` interval of the mean (NaN spread for one value)."""
     x = _sample(values, 'values')
-    mean = float(x.mean())
+    mean = float(x[0]) if _constant(x) else float(x.mean())
     if x.size < 2:
         return Summary(1, mean, math.nan, math.nan, math.nan)
-    sd = float(x.std(ddof=1))
+    sd = float(x.std(ddof=1)) if np.ptp(x) > 0 else 0.0    # no rounding residue
     half = float(stats.t.ppf(0.5 + confidence / 2, x.size - 1)) * sd / math.sqrt(x.size)
     return Summary(int(x.size), mean, sd, mean - half, mean + half)
 
@@ -141,14 +147,17 @@ def ttest(a, b, equal_var: bool = False) -> TTest:
         warnings.simplefilter('ignore', RuntimeWarning)
         result = stats.ttest_ind(a, b, equal_var=equal_var)
     name = "Student's t-test" if equal_var else "Welch's t-test"
-    return TTest(name, float(result.statistic), float(result.df), float(result.pvalue),
-                 float(a.mean()), float(b.mean()), int(a.size), int(b.size))
+    t, df, p = float(result.statistic), float(result.df), float(result.pvalue)
+    if _constant(a) and _constant(b):   # not a rounding residue's t: no test at all
+        t = df = p = math.nan
+    return TTest(name, t, df, p, summarize(a).mean, summarize(b).mean, int(a.size),
+                 int(b.size))
 
 
 def _welch(a: np.ndarray, b: np.ndarray, what: str) -> tuple[float, float, float]:
     """(a - b, its standard error, Welch-Satterthwaite df); refuses groups without spread."""
     va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
-    if va + vb == 0:
+    if _constant(a) and _constant(b):
         raise ValueError(f'{what} is undefined: no spread within either group '
                          f'(all a = {a[0]:g}, all b = {b[0]:g})')
     df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1))
@@ -182,13 +191,14 @@ def hedges_g(a, b, confidence: float = CONFIDENCE) -> EffectSize:
     Returns:
         An ``EffectSize``: d = (mean_a - mean_b) / pooled SD, g = J * d with
         J = Gamma(df/2) / (sqrt(df/2) Gamma((df-1)/2)), df = n_a + n_b - 2; the
-        interval inverts the noncentral t of Student's statistic and is scaled by J.
+        interval for delta inverts the noncentral t of Student's statistic (exact for
+        normal data with equal variances).
     """
     a, b = _pair(a, b, "Hedges' g")
     confidence = _level('confidence', confidence)
     df = a.size + b.size - 2
     pooled = math.sqrt(((a.size - 1) * a.var(ddof=1) + (b.size - 1) * b.var(ddof=1)) / df)
-    if pooled == 0:
+    if _constant(a) and _constant(b):
         raise ValueError(f"Hedges' g is undefined: no spread within either group "
                          f'(all a = {a[0]:g}, all b = {b[0]:g})')
     d = float((a.mean() - b.mean()) / pooled)
@@ -196,7 +206,7 @@ def hedges_g(a, b, confidence: float = CONFIDENCE) -> EffectSize:
     scale = math.sqrt(1 / a.size + 1 / b.size)
     t = d / scale
     tail = (1 - confidence) / 2
-    ends = [_noncentrality(t, df, q) * scale * j for q in (1 - tail, tail)]
+    ends = [_noncentrality(t, df, q) * scale for q in (1 - tail, tail)]
     return EffectSize(j * d, ends[0], ends[1], d)
 
 
@@ -281,9 +291,9 @@ def compare(a, b, margin: float = PAPER_DIFFERENCE, alpha: float = ALPHA,
     welch = ttest(a, b)
     rank = mann_whitney(a, b)
     sa, sb = summarize(a, confidence), summarize(b, confidence)
-    if sa.sd == 0 and sb.sd == 0:
+    if _constant(a) and _constant(b):
         nan = math.nan
-        diff = welch.mean_a - welch.mean_b
+        diff = sa.mean - sb.mean
         return Comparison(sa, sb, Interval(diff, nan, nan, confidence, 0.0, nan), welch,
                           EffectSize(nan, nan, nan, nan), rank,
                           Equivalence(float(margin), nan, nan, nan, nan, nan, nan, alpha,
