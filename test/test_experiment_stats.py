@@ -187,8 +187,8 @@ def test_one_constant_group_is_still_compared():
 def test_groups_without_spread_are_compared_explicitly_and_refused_by_each_test():
     c = stats.compare([0.7, 0.7, 0.7], [0.7, 0.7])
     assert not c.spread and c.interval.difference == 0
-    assert all(math.isnan(x) for x in (c.interval.ci_low, c.welch.p, c.effect.g,
-                                        c.equivalence.p))
+    undefined = (c.interval.ci_low, c.welch.p, c.effect.g, c.equivalence.p)
+    assert all(math.isnan(x) for x in undefined)
     assert c.rank.p == 1.0 and not c.equivalence.equivalent
     for call in (stats.welch_interval, stats.hedges_g, stats.tost):
         with pytest.raises(ValueError, match='no spread within either group') as info:

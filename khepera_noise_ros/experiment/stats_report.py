@@ -62,6 +62,8 @@ def _f(x, digits: int = 3) -> str:
 
 
 def _interval(x: float, low: float, high: float, digits: int = 3, sign: bool = True) -> str:
+    if not math.isfinite(x):
+        return 'n/a'
     if not math.isfinite(low):
         return f'{x:+.{digits}f}' if sign else _f(x, digits)
     head = f'{x:+.{digits}f}' if sign else f'{x:.{digits}f}'
