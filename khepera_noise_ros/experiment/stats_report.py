@@ -61,13 +61,13 @@ def _f(x, digits: int = 3) -> str:
     return 'n/a' if x is None or not math.isfinite(x) else f'{x:.{digits}f}'
 
 
-def _interval(x: float, low: float, high: float, digits: int = 3, sign: bool = True) -> str:
+def _interval(x: float, low: float, high: float, digits: int = 3) -> str:
+    """'+0.041 [0.032, 0.050]'; without the interval where it is undefined."""
     if not math.isfinite(x):
         return 'n/a'
     if not math.isfinite(low):
-        return f'{x:+.{digits}f}' if sign else _f(x, digits)
-    head = f'{x:+.{digits}f}' if sign else f'{x:.{digits}f}'
-    return f'{head} [{low:.{digits}f}, {high:.{digits}f}]'
+        return f'{x:+.{digits}f}'
+    return f'{x:+.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]'
 
 
 def _p(p: float) -> str:
