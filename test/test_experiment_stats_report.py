@@ -139,3 +139,27 @@ def test_a_step_without_spread_is_reported_as_such_not_as_a_crash():
     assert ('| 2 | test in simulation | similar | 0.700 ± 0.000 | 0.700 ± 0.000 | +0.000 | '
             'n/a | n/a | 1.000 (0.50) | n/a (± 0.032) | **no spread** |') in text
     assert '- 5%: no test: every trial within each model scored the same (40.0 vs 40.0).' in text
+
+
+def test_kinds_text_groups_the_steps_by_verdict():
+    tests = [{'step': s, 'verdict': {'kind': k}} for s, k in
+             ((1, 'equivalent'), (2, 'equivalent'), (3, 'underpowered'))]
+    assert stats_report.kinds_text(tests) == 'equivalent at steps 1, 2; underpowered at step 3'
+
+
+def test_a_finding_the_design_cannot_test_is_called_underpowered_not_differs():
+    results = synthetic()
+    z = np.linspace(-1, 1, 10)
+    z = (z - z.mean()) / z.std(ddof=1)
+    for (key, t, step), unit in results.units.items():
+        if step == 5 and key.startswith('5pct'):       # SD 0.06, combination 0.005 worse
+            unit['mean'] = 0.76 - 0.005 * ('combination' in key) + 0.06 * z[t]
+    analysis = report.analyse(results, None)
+    step5 = next(t for t in analysis['tests'] if t['level'] == '5%' and t['step'] == 5)
+    assert step5['verdict']['kind'] == 'underpowered'
+    finding = next(f for f in analysis['findings'] if 'final real test' in f['claim'])
+    assert finding['verdict'] == 'underpowered'
+    assert 'underpowered (our interval admits the effect and none)' in report.summary(analysis)
+    ten = next(f for f in analysis['findings'] if f['claim'].startswith('10%'))
+    level = [t for t in analysis['tests'] if t['level'] == '10%']
+    assert ten['ours'].endswith(stats_report.kinds_text(level))

@@ -142,10 +142,12 @@ def findings(analysis: dict, config: ReplicateConfig) -> list[dict]:
     return out
 
 
-def _finding(claim: str, paper: str, ours: str, agrees: bool, direction: bool = False) -> dict:
-    """``direction``: a significant difference claimed, and ours has its sign but not p."""
-    verdict = 'agrees' if agrees else 'same direction, not significant' if direction \
-        else 'differs'
+def _finding(claim: str, paper: str, ours: str, agrees: bool, direction: bool = False,
+             underpowered: bool = False) -> dict:
+    """``direction``: a significant difference claimed, and ours has its sign but not p;
+    ``underpowered``: our interval admits both the claimed difference and none."""
+    verdict = 'agrees' if agrees else 'underpowered' if underpowered else \
+        'same direction, not significant' if direction else 'differs'
     return {'claim': claim, 'paper': paper, 'ours': ours, 'verdict': verdict}
 
 
@@ -171,8 +173,8 @@ def _five_percent(analysis: dict) -> list[dict]:
     out.append(_finding(
         '5%: steps 1 and 2 (simulation) almost identical for both models',
         'no difference reported', '; '.join(f"step {t['step']}: {t['mean_a']:.3f} vs "
-                                            f"{t['mean_b']:.3f}, {t['text']}" for t in similar),
-        all(t['p'] >= ALPHA for t in similar)))
+                                            f"{t['mean_b']:.3f}, {t['text']}" for t in similar)
+        + f'; {stats_report.kinds_text(similar)}', all(t['p'] >= ALPHA for t in similar)))
     drops = {m: _mean(analysis, m, 2) - _mean(analysis, m, 3) for m in (c, i)}
     out.append(_finding(
         '5%: real test (step 3) drops dramatically from the simulation test (step 2)',
@@ -201,13 +203,14 @@ def _five_percent(analysis: dict) -> list[dict]:
         '5%: final real test (step 5): combination significantly better',
         '0.795 vs 0.763, p < 0.05', f"{step5['mean_a']:.3f} vs {step5['mean_b']:.3f}: "
                                     f"{step5['verdict']['text']}",
-        step5['t'] > 0 and step5['p'] < ALPHA, step5['t'] > 0))
+        step5['t'] > 0 and step5['p'] < ALPHA, step5['t'] > 0,
+        step5['verdict']['kind'] == 'underpowered'))
     gen = next(g for g in analysis['best_generation'] if g['level'] == '5%')
     out.append(_finding(
         '5%: phase 1 reaches its best fitness sooner with the combination model',
         'generation 35.0 vs 42.8, p < 0.05',
         f"generation {gen['mean_a']:.1f} vs {gen['mean_b']:.1f}: {gen['verdict']['text']}",
-        gen['t'] < 0 and gen['p'] < ALPHA, gen['t'] < 0))
+        gen['t'] < 0 and gen['p'] < ALPHA, gen['t'] < 0, gen['verdict']['kind'] == 'underpowered'))
     return out
 
 
@@ -217,7 +220,8 @@ def _ten_percent(analysis: dict) -> dict:
     return _finding('10%: both models perform similarly at every step',
                     'no marked difference',
                     f"smallest p = {low['p']:.3f} (step {low['step']}; rank test "
-                    f"p = {low['rank_p']:.3f})", all(t['p'] >= ALPHA for t in tests))
+                    f"p = {low['rank_p']:.3f}); {stats_report.kinds_text(tests)}",
+                    all(t['p'] >= ALPHA for t in tests))
 
 
 # --- writing -----------------------------------------------------------------------------
@@ -439,7 +443,9 @@ def _files_md(config: ReplicateConfig) -> str:
 
 
 VERDICT_WORDS = {'agrees': 'agree', 'same direction, not significant':
-                 'in the same direction but not significant', 'differs': 'differ'}
+                 'in the same direction but not significant',
+                 'underpowered': 'underpowered (our interval admits the effect and none)',
+                 'differs': 'differ'}
 
 
 def _tally(analysis: dict) -> str:

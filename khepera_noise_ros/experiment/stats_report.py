@@ -111,6 +111,15 @@ def level_table(level: str, tests: list[dict], steps: dict) -> str:
                       *notes, ''])
 
 
+def kinds_text(tests: list[dict]) -> str:
+    """'equivalent at steps 1, 2; underpowered at step 5': the verdicts of several steps."""
+    steps: dict[str, list[str]] = {}
+    for t in tests:
+        steps.setdefault(t['verdict']['kind'], []).append(str(t['step']))
+    return '; '.join(f"{kind} at step{'s' if len(s) > 1 else ''} {', '.join(s)}"
+                     for kind, s in steps.items())
+
+
 def generation_md(tests: list[dict]) -> str:
     """Markdown: the generation of phase 1's best, per level, beside the paper's."""
     rows, notes = [], []
