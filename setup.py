@@ -26,7 +26,8 @@ setup(
                    'ros-rcl-interfaces', 'ros-lifecycle-msgs'],
         # rosbag2 (MCAP) recordings without the ROS C++ stack.
         'bags': ['rosbags'],
-        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8'],
+        # statsmodels: an independent check of the power and TOST code (docs/statistics.md).
+        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'statsmodels'],
     },
     zip_safe=True,
     maintainer='khepera_noise_ros maintainers',

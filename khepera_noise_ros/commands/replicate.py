@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from ..experiment import config as settings
-from ..experiment import report
+from ..experiment import report, stats_report
 from ..experiment.protocol import Backends, ConditionEpisodes, Experiment, batch_simulate, \
     chunked, chunked_trace, core_simulate, play
 from ..experiment.store import Store
@@ -61,6 +61,7 @@ def run(args) -> int:
     if found:
         print(f'resuming in {out}: {found} finished units and {len(store.checkpoints())} '
               f'evolutions part-way', file=sys.stderr)
+    print(stats_report.power_before_run(config, store))
     started, finished = time.monotonic(), False
     try:
         with _terminate_as_interrupt(), open_backends(config, args.port) as backends, \

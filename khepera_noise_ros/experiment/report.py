@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from ..files import atomic_write_text, write_json
-from . import figures
+from . import figures, stats_report
 from .config import Level, ReplicateConfig
 from .protocol import STEPS
-from .stats import Summary, describe, power, rank_test, summarize, ttest
+from .stats import Summary, describe, rank_test, summarize, ttest
 from .store import Store
 
 RESULTS_FORMAT = 'khepera-noise-replicate-results/1'
@@ -70,9 +70,12 @@ def analyse(results: Results, figure8: dict | None) -> dict:
     config = results.config
     steps = {c.name: [asdict(summarize(results.scores(c, s))) for s in STEPS]
              for c in config.conditions}
-    analysis = {'table1': _table1(results), 'steps': steps,
-                'tests': [_step_test(results, level, s) for level in config.levels for s in STEPS],
-                'best_generation': [_generation_test(results, level) for level in config.levels],
+    stats_settings = stats_report.settings(config)
+    analysis = {'table1': _table1(results), 'steps': steps, 'statistics': stats_settings,
+                'tests': [_step_test(results, level, s, stats_settings)
+                          for level in config.levels for s in STEPS],
+                'best_generation': [_generation_test(results, level, stats_settings['alpha'])
+                                    for level in config.levels],
                 'figure8': figure8}
     analysis['findings'] = findings(analysis, config)
     return analysis
@@ -95,22 +98,30 @@ def _table1(results: Results) -> list[dict]:
     return rows
 
 
-def _compare(level: Level, a, b) -> dict:
+def _compare(level: Level, a, b, **judging) -> dict:
     test = ttest(a, b)
     return {'level': level.label, **asdict(test), 'text': describe(test),
-            'rank_p': rank_test(a, b)}
+            'rank_p': rank_test(a, b), **stats_report.judged(a, b, **judging)}
 
 
-def _step_test(results: Results, level: Level, step: int) -> dict:
+def _step_test(results: Results, level: Level, step: int, stats_settings: dict) -> dict:
     combo, indep = level.conditions
+    reference = stats_report.step_reference(level.label, step, PAPER['table1'])
     return {'step': step, 'what': STEPS[step],
-            **_compare(level, results.scores(combo, step), results.scores(indep, step))}
+            **_compare(level, results.scores(combo, step), results.scores(indep, step),
+                       margin=stats_settings['margin'], alpha=stats_settings['alpha'],
+                       reference=reference)}
 
 
-def _generation_test(results: Results, level: Level) -> dict:
+def _generation_test(results: Results, level: Level, alpha: float) -> dict:
     combo, indep = level.conditions
-    out = _compare(level, results.best_generations(combo), results.best_generations(indep))
-    out['paper'] = PAPER['best_generation'].get(level.label)
+    paper = PAPER['best_generation'].get(level.label)
+    gap = PAPER['best_generation']['5%']
+    out = _compare(level, results.best_generations(combo), results.best_generations(indep),
+                   margin=abs(gap['combination'] - gap['independent']), alpha=alpha,
+                   reference=paper and paper['combination'] - paper['independent'],
+                   words=stats_report.GENERATION_WORDS, digits=1)
+    out['paper'] = paper
     return out
 
 
@@ -131,10 +142,12 @@ def findings(analysis: dict, config: ReplicateConfig) -> list[dict]:
     return out
 
 
-def _finding(claim: str, paper: str, ours: str, agrees: bool, direction: bool = False) -> dict:
-    """``direction``: a significant difference claimed, and ours has its sign but not p."""
-    verdict = 'agrees' if agrees else 'same direction, not significant' if direction \
-        else 'differs'
+def _finding(claim: str, paper: str, ours: str, agrees: bool, direction: bool = False,
+             underpowered: bool = False) -> dict:
+    """``direction``: a significant difference claimed, and ours has its sign but not p;
+    ``underpowered``: our interval admits both the claimed difference and none."""
+    verdict = 'agrees' if agrees else 'underpowered' if underpowered else \
+        'same direction, not significant' if direction else 'differs'
     return {'claim': claim, 'paper': paper, 'ours': ours, 'verdict': verdict}
 
 
@@ -160,8 +173,8 @@ def _five_percent(analysis: dict) -> list[dict]:
     out.append(_finding(
         '5%: steps 1 and 2 (simulation) almost identical for both models',
         'no difference reported', '; '.join(f"step {t['step']}: {t['mean_a']:.3f} vs "
-                                            f"{t['mean_b']:.3f}, {t['text']}" for t in similar),
-        all(t['p'] >= ALPHA for t in similar)))
+                                            f"{t['mean_b']:.3f}, {t['text']}" for t in similar)
+        + f'; {stats_report.kinds_text(similar)}', all(t['p'] >= ALPHA for t in similar)))
     drops = {m: _mean(analysis, m, 2) - _mean(analysis, m, 3) for m in (c, i)}
     out.append(_finding(
         '5%: real test (step 3) drops dramatically from the simulation test (step 2)',
@@ -188,15 +201,16 @@ def _five_percent(analysis: dict) -> list[dict]:
     step5 = _test(analysis, '5%', 5)
     out.append(_finding(
         '5%: final real test (step 5): combination significantly better',
-        '0.795 vs 0.763, p < 0.05', f"{step5['mean_a']:.3f} vs {step5['mean_b']:.3f}, "
-                                    f"{step5['text']}",
-        step5['t'] > 0 and step5['p'] < ALPHA, step5['t'] > 0))
+        '0.795 vs 0.763, p < 0.05', f"{step5['mean_a']:.3f} vs {step5['mean_b']:.3f}: "
+                                    f"{step5['verdict']['text']}",
+        step5['t'] > 0 and step5['p'] < ALPHA, step5['t'] > 0,
+        step5['verdict']['kind'] == 'underpowered'))
     gen = next(g for g in analysis['best_generation'] if g['level'] == '5%')
     out.append(_finding(
         '5%: phase 1 reaches its best fitness sooner with the combination model',
         'generation 35.0 vs 42.8, p < 0.05',
-        f"generation {gen['mean_a']:.1f} vs {gen['mean_b']:.1f}, {gen['text']}",
-        gen['t'] < 0 and gen['p'] < ALPHA, gen['t'] < 0))
+        f"generation {gen['mean_a']:.1f} vs {gen['mean_b']:.1f}: {gen['verdict']['text']}",
+        gen['t'] < 0 and gen['p'] < ALPHA, gen['t'] < 0, gen['verdict']['kind'] == 'underpowered'))
     return out
 
 
@@ -206,7 +220,8 @@ def _ten_percent(analysis: dict) -> dict:
     return _finding('10%: both models perform similarly at every step',
                     'no marked difference',
                     f"smallest p = {low['p']:.3f} (step {low['step']}; rank test "
-                    f"p = {low['rank_p']:.3f})", all(t['p'] >= ALPHA for t in tests))
+                    f"p = {low['rank_p']:.3f}); {stats_report.kinds_text(tests)}",
+                    all(t['p'] >= ALPHA for t in tests))
 
 
 # --- writing -----------------------------------------------------------------------------
@@ -278,9 +293,13 @@ def _f(x: float, digits: int = 4) -> str:
 
 
 def markdown(config: ReplicateConfig, analysis: dict, backends: dict, sessions: list) -> str:
+    s = analysis['statistics']
     parts = [_head(config, analysis, backends, sessions), _table1_md(analysis),
-             _steps_md(config, analysis), _generation_md(analysis), _figure8_md(config, analysis),
-             _findings_md(analysis), _why_md(config, analysis), _files_md(config)]
+             _steps_md(config, analysis), stats_report.generation_md(analysis['best_generation']),
+             stats_report.power_md(config.trials, analysis['tests'], s['margin'], s['alpha'],
+                                   s['target']),
+             _figure8_md(config, analysis), _findings_md(analysis), _why_md(config, analysis),
+             _files_md(config)]
     return '\n'.join(parts)
 
 
@@ -328,43 +347,21 @@ def _table1_md(analysis: dict) -> str:
 
 
 def _steps_md(config: ReplicateConfig, analysis: dict) -> str:
-    out = ['## Figures 9 and 10: training and testing performance per step\n']
+    out = ['## Figures 9 and 10: training and testing performance per step\n',
+           stats_report.statistics_intro(analysis['statistics']['margin'],
+                                         analysis['statistics']['alpha'])]
     for level in config.levels:
-        combo, indep = (c.name for c in level.conditions)
         out.append(f'![{level.figure}]({level.figure}.png)\n')
         out.append(f'**{_figure_name(level.figure)}, {level.label} noise** (mean ± SD over '
-                   f"trials; Welch's t-test of combination against independent, and the "
-                   f'Mann-Whitney p as a check that outliers cannot drive)\n')
-        out.append('| Step | What | Combination | Independent | t | df | p | rank p |')
-        out.append('| --- | --- | --- | --- | --- | --- | --- | --- |')
-        for step in STEPS:
-            a, b = analysis['steps'][combo][step - 1], analysis['steps'][indep][step - 1]
-            t = _test(analysis, level.label, step)
-            out.append(f"| {step} | {STEPS[step]} | {_f(a['mean'])} ± {_f(a['sd'], 3)} | "
-                       f"{_f(b['mean'])} ± {_f(b['sd'], 3)} | {_f(t['t'], 2)} | "
-                       f"{_f(t['df'], 1)} | {_f(t['p'], 3)} | {_f(t['rank_p'], 3)} |")
-        out.append('')
+                   f'trials)\n')
+        out.append(stats_report.level_table(
+            level.label, [t for t in analysis['tests'] if t['level'] == level.label], STEPS))
     return '\n'.join(out)
 
 
 def _figure_name(figure: str) -> str:
     """'fig9' -> 'Figure 9'; other names as they are."""
     return f'Figure {figure[3:]}' if figure[:3] == 'fig' and figure[3:].isdigit() else figure
-
-
-def _generation_md(analysis: dict) -> str:
-    rows = []
-    for g in analysis['best_generation']:
-        paper = g['paper']
-        paper_text = (f"{paper['combination']} vs {paper['independent']}, p < 0.05"
-                      if paper else '-')
-        rows.append(f"| {g['level']} | {g['mean_a']:.1f} | {g['mean_b']:.1f} | {_f(g['t'], 2)} "
-                    f"| {_f(g['df'], 1)} | {_f(g['p'], 3)} | {paper_text} |")
-    return """## Generation at which phase 1 found its best
-
-| Level | Combination | Independent | t | df | p | Paper |
-| --- | --- | --- | --- | --- | --- | --- |
-""" + '\n'.join(rows) + '\n'
 
 
 def _figure8_md(config: ReplicateConfig, analysis: dict) -> str:
@@ -413,7 +410,7 @@ def _why_md(config: ReplicateConfig, analysis: dict) -> str:
              f'{config.phase1.population * (config.phase1.generations + 1)} single-episode '
              'evaluations is a lucky one, so training scores sit above test scores even '
              'without any reality gap; the generation of the best is likewise partly luck.']
-    lines += _collapse_lines(config, analysis) + _power_lines(config, analysis)
+    lines += _collapse_lines(config, analysis)
     return '\n'.join(lines) + '\n'
 
 
@@ -434,22 +431,6 @@ def _collapse_lines(config: ReplicateConfig, analysis: dict) -> list[str]:
             'medians and the rank test are the fairer comparison.']
 
 
-def _power_lines(config: ReplicateConfig, analysis: dict) -> list[str]:
-    """How likely our design was to see the paper's step-5 difference, given our spread."""
-    rows = [r for r in analysis['table1'] if r['condition'].startswith('5% ')]
-    if len(rows) != 2 or not all(math.isfinite(r['sd']) for r in rows):
-        return []
-    sd = math.sqrt((rows[0]['sd'] ** 2 + rows[1]['sd'] ** 2) / 2)
-    effect = PAPER['table1']['5% combination'] - PAPER['table1']['5% independent']
-    chance = power(effect, sd, config.trials, ALPHA)
-    return [f'- **Ten trials detect only large effects.** With our spread of final scores '
-            f'(SD {sd:.3f}) and {config.trials} trials per model, a two-sided test at '
-            f'p < {ALPHA} finds a true difference as large as the paper\'s '
-            f'({effect:.3f}) with probability {chance:.0%}. A "significant" or "not '
-            f'significant" verdict that flips between the paper and us is therefore weak '
-            f'evidence either way; the confidence intervals say more.']
-
-
 def _files_md(config: ReplicateConfig) -> str:
     figs = ', '.join(f'`{lv.figure}.png`' for lv in config.levels)
     return f"""## Files
@@ -462,7 +443,9 @@ def _files_md(config: ReplicateConfig) -> str:
 
 
 VERDICT_WORDS = {'agrees': 'agree', 'same direction, not significant':
-                 'in the same direction but not significant', 'differs': 'differ'}
+                 'in the same direction but not significant',
+                 'underpowered': 'underpowered (our interval admits the effect and none)',
+                 'differs': 'differ'}
 
 
 def _tally(analysis: dict) -> str:
