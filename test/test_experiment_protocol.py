@@ -78,7 +78,8 @@ def test_every_trial_goes_through_the_five_steps_in_order(tmp_path):
             assert u[5]['genome'] == best4
             assert u[2]['seeds'] == u[3]['seeds'] == u[5]['seeds']  # the same test episodes
             assert len(u[3]['fitness']) == config.test_episodes
-            assert u[1]['evaluations'] == episodes_per_run(config.phase1) == 4 + 3 * 4
+            retests = 4 * config.phase1.retest_episodes if config.phase1.best == 'retest' else 0
+            assert u[1]['evaluations'] == episodes_per_run(config.phase1) == 4 + 3 * 4 + retests
             assert len(u[1]['history']) == config.phase1.generations + 1
             assert 0 <= u[1]['best_generation'] <= config.phase1.generations
             assert all(0.0 <= f <= 1.0 for s in (2, 3, 5) for f in u[s]['fitness'])

@@ -229,7 +229,8 @@ def _reality(config: settings.ReplicateConfig, ros, ports) -> tuple:
 
 def _world(config: settings.ReplicateConfig) -> EmulatedWorld:
     return EmulatedWorld(config.effects, seed=config.reality['seed'],
-                         robots=config.reality['robots'], geometry=config.world)
+                         robots=config.reality['robots'], geometry=config.world,
+                         start_bearing_deg=config.reality['start_bearing_deg'])
 
 
 def _emulated_robots(config: settings.ReplicateConfig) -> KheperaRobots:

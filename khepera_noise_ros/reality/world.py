@@ -69,9 +69,15 @@ class EmulatedWorld:
     """``robots`` Kheperas, each in its own copy of the room, under ``config``'s effects."""
 
     def __init__(self, config: EffectsConfig | None = None, seed: int = 0, robots: int = 1,
-                 geometry: World = World()):
+                 geometry: World = World(), start_bearing_deg: float | None = None):
+        """``start_bearing_deg``: where the experimenter puts the lamp each time a robot is
+        placed for an episode (``set_condition``); None leaves the robot as it was."""
         if not isinstance(robots, (int, np.integer)) or robots < 1:
             raise ValueError(f'robots must be an integer >= 1, got {robots!r}')
+        if start_bearing_deg is not None and not np.isfinite(start_bearing_deg):
+            raise ValueError(f'start_bearing_deg must be finite degrees or None, '
+                             f'got {start_bearing_deg!r}')
+        self.start_bearing_deg = start_bearing_deg
         self.config = EffectsConfig.real_robot() if config is None else config
         self.geometry = geometry
         self.robots = int(robots)
@@ -104,9 +110,12 @@ class EmulatedWorld:
     def set_condition(self, condition: Condition | str, robot=None) -> None:
         """Place the lamp and set the room's light, as the experimenter would."""
         condition = condition_named(condition)
-        for r in self._rows(robot):
+        rows = self._rows(robot)
+        for r in rows:
             self.conditions[r] = condition
             self._worlds[r] = condition.world(self.geometry)
+        if self.start_bearing_deg is not None:
+            self._bearing[rows] = self.start_bearing_deg
 
     def set_bearing(self, deg, robot=None) -> None:
         """Put the lamp at ``deg`` in the robot's frame (the experimenter turns the robot)."""
