@@ -45,14 +45,16 @@ class Condition:
 
 
 # The task's arena, and section 2's four measurements (lamp straight ahead; the labels of
-# ``synchrony.PAPER_CORRELATION``).  The bulb distances are chosen so that the two front
-# sensors read about 90 (1 ft) and 290 (2 ft); the room with the lights on reads about 250.
+# ``synchrony.PAPER_CORRELATION``), all in the task's light regime: the bright condition
+# (1 ft from the bulb) is the task's own lamp, the dark room is the task's room with the
+# lamp off, and the 2 ft bulb (lamp 140 mm away in the simulator's geometry) and the lit
+# room (ambient 250) give the mid-range readings the side sensors see during the task.
 CONDITIONS = {
     'task': Condition(),
-    'bulb_1ft': Condition(lamp_distance_mm=14.0, ambient=500.0),
-    'bulb_2ft': Condition(lamp_distance_mm=130.0, ambient=500.0),
+    'bulb_1ft': Condition(),
+    'bulb_2ft': Condition(lamp_distance_mm=140.0, ambient=World.ambient),
     'room_fluorescent': Condition(lamp_distance_mm=LAMP_OFF_MM, ambient=250.0),
-    'room_dark': Condition(lamp_distance_mm=LAMP_OFF_MM, ambient=500.0),
+    'room_dark': Condition(lamp_distance_mm=LAMP_OFF_MM, ambient=World.ambient),
 }
 SECTION2 = ('bulb_1ft', 'bulb_2ft', 'room_fluorescent', 'room_dark')
 
