@@ -2,13 +2,12 @@
 
 The defaults are the paper's numbers with the measurement protocol that can detect its
 effect (``protocol: measured``: ten test episodes, bests chosen by re-test, episodes
-from a reset bearing); ``PROTOCOLS['paper']`` is the paper's literal protocol.  The
-world's unstated parameters are calibrated (docs/calibration.md).  A YAML file (``config/replicate.yaml`` is a
-commented copy of the defaults) overrides any of them; keys it does not give
-keep their default, and an unknown key is an error that names it.  ``quick``
-holds the overrides ``--quick`` applies on top.  The settings actually used are
-written next to the results, with a hash that the results store checks on
-resume.
+from a reset bearing); ``PROTOCOLS['paper']`` is the paper's literal protocol. The
+world's unstated parameters are calibrated (docs/calibration.md). A YAML file
+(``config/replicate.yaml`` is a commented copy of the defaults) overrides any of them;
+keys it does not give keep their default, and an unknown key is an error that names it.
+``quick`` holds the overrides ``--quick`` applies on top. The settings actually used are
+written next to the results, with a hash that the results store checks on resume.
 """
 from __future__ import annotations
 

@@ -184,8 +184,8 @@ def table(analysis: dict, step: int = 5) -> str:
     """Markdown: the step's difference (combination - independent) with CI per point."""
     rows = analysis['points']
     levels = _levels(rows)
-    head = '| reality | ' + ' | '.join(f'{lv}: comb - ind, step {step} [95% CI]'
-                                        for lv in levels) + ' |'
+    columns = [f'{lv}: comb - ind, step {step} [95% CI]' for lv in levels]
+    head = '| reality | ' + ' | '.join(columns) + ' |'
     lines = [head, '|' + ' --- |' * (len(levels) + 1)]
     for r in rows:
         cells = []
