@@ -220,3 +220,15 @@ def test_an_interruption_in_reality_resumes_mid_phase_2(tmp_path):
     _, experiment = run(config, tmp_path, backends=again)
     assert again.reality.episodes == left
     assert store.load(config.conditions[0].key, 0, 5) is not None
+
+
+def test_phase_2_re_tests_its_best_on_episodes_apart_from_the_final_test(tmp_path):
+    config = tiny()
+    assert config.phase2.best == 'retest'
+    store, experiment = run(config, tmp_path)
+    spy = experiment.backends.reality
+    tests = {s for c in config.conditions for t in range(config.trials)
+             for s in store.load(c.key, t, 5)['seeds']}
+    step4 = spy.batches[1:-1]       # step 3 first, step 5 last, phase 2 in between
+    evolution = {int(s) for _, seeds in step4 for s in seeds}
+    assert evolution and not evolution & tests
