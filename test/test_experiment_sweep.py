@@ -53,8 +53,8 @@ def test_bad_sweep_settings_are_refused_naming_the_value(spec, named):
 @pytest.mark.parametrize('args, named', [
     (['--trials', '-1'], '-1'), (['--levels', '1.5'], '1.5'), (['--shares', 'x'], 'x'),
 ])
-def test_the_sweep_command_refuses_bad_settings_with_exit_2(tmp_path, capsys, tiny_config,
-                                                           args, named):
+def test_the_sweep_command_refuses_bad_settings_with_exit_2(
+        tmp_path, capsys, tiny_config, args, named):
     assert cli.main(['sweep', '--config', str(tiny_config), '--out', str(tmp_path / 's'),
                      '--no-progress', *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
