@@ -132,7 +132,13 @@ def gap_study(world, episode, trials: int, episodes: int) -> None:
     rows += [('a new unit each episode', robot.replace(sensor_gain_offset={'per_robot': True}))]
     rows += [(f'without {name}', robot.replace(**{name: {'enabled': False}}))
              for name in EFFECTS if getattr(robot, name).enabled]
+    rows += [(f'only {name}', robot.only(name))
+             for name in EFFECTS if getattr(robot, name).enabled]
     rows += [('no effect, 1% sensor noise', EffectsConfig.none(0.01))]
+    rows += [('before: 5% gain spread, offset sd 5, no latency',
+              robot.replace(sensor_gain_offset={'strength': 0.05, 'offset_sd': 5.0,
+                                                'per_robot': True},
+                            sensor_latency={'enabled': False}))]
     for label, effects in rows:
         real = real_test(genomes, world, episode, effects, episodes).mean()
         print(f'| {label} | {real:.3f} | {sim - real:+.3f} |', flush=True)
