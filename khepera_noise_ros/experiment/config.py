@@ -54,7 +54,7 @@ DEFAULTS: dict = {
     # the emulated robot's world: robots in a batch, its seed, and its effects
     # (a mapping for reality.effects.EffectsConfig.from_dict, or the path of such a file)
     # start_bearing_deg: where each real episode starts (null: where the last one ended)
-    'reality': {'robots': 40, 'seed': 1, 'effects': {}, 'start_bearing_deg': 0.0},
+    'reality': {'robots': 100, 'seed': 1, 'effects': {}, 'start_bearing_deg': 0.0},
     'quick': {'trials': 3},
 }
 # Measurement protocols: overrides laid over the defaults (``measured`` is the defaults).
