@@ -19,11 +19,12 @@ and, on the wheels, ``actuator_turn_error``: a turn's rotation differs from the
 one commanded by a scale (wheel slip on the floor) and a random part.
 
 Every effect has ``enabled`` and ``strength`` and, where it makes sense, a
-``location`` (sensors, or groups of sensors); the names are the DESIGN.md
-vocabulary.  ``EffectsConfig`` (``config``) is loaded from and saved to YAML; a bad value is
-a ValueError naming its key.  Randomness arrives as a fixed block of standard
-normal draws per robot and sample (``DRAWS``), so switching an effect on or
-off never changes the draws another effect sees.
+``location`` (sensors, or groups of sensors); the names are those the gap
+diagnosis uses.  ``EffectsConfig`` (``config``) is loaded from and saved to YAML; a
+bad value is a ValueError naming its key; ``processes`` carries the effects out.
+Randomness arrives as a fixed block of standard normal draws per robot and
+sample (``DRAWS``), so switching an effect on or off never changes the draws
+another effect sees.
 """
 from .config import (ALL_SENSORS, DRAWS, EFFECT_TYPES, EFFECTS, FORMAT, REAL_ROBOT,
                      ActuatorTurnError, CorrelatedNoise, EffectsConfig, IntensityDependentNoise,
