@@ -10,7 +10,8 @@ Each robot has its own random streams, keyed from ``seed``: one for its
 sensors, one for its wheels, each a counter-based hash (splitmix64) of the
 robot's key and how often it has been read or turned, so a whole batch draws in
 one vectorised pass.  A robot's readings therefore depend only on the seed, its
-index and how often it has been read and turned, never on the other robots.  Time is virtual: one ``read`` is one sample period.
+index and how often it has been read and turned, never on the other robots.
+Time is virtual: one ``read`` is one sample period.
 """
 from __future__ import annotations
 
