@@ -305,7 +305,10 @@ Khepera light-centring controller in simulation and transferring it to reality.
 - **Simulation**: {backends.get('simulation', '?')}.
 - **Reality**: {backends.get('reality', '?')}. Our "reality" is a robot emulator with
   effects of its own, not the author's lab.
-- **Settings**: `config.yaml` (hash `{config.hash}`); seed {config.seed}.
+- **Settings**: `config.yaml` (hash `{config.hash}`); seed {config.seed}; protocol
+  {config.data['protocol']}. Unstated in the paper, calibrated (docs/calibration.md):
+  lamp gain {config.world.gain:g}, knock ±{config.task.perturbation_deg:g}°,
+  {config.world.deg_per_power:g}° per unit of power.
 - **Run time**: {total:.0f} s over {len(sessions)} session(s) on this machine.
 
 Scores: steps 1 and 4 are {_training_score(config)};
