@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from khepera_noise_ros.core import baseline, task
+from khepera_noise_ros.core import baseline, network, task
+from khepera_noise_ros.core.evolution import EAConfig, SteadyStateEA, evolve
 from khepera_noise_ros.core.khepera import World
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.experiment import config as settings
@@ -51,6 +52,18 @@ def _paired_loss(policy, world=World(), episode=task.Task()):
 def test_ten_percent_noise_costs_a_fixed_controller_measurably():
     loss, half = _paired_loss(baseline.turn_toward_light)
     assert loss - half > 0.005          # the whole 95% CI above half a percent of fitness
+
+
+def test_a_controller_evolved_without_noise_loses_measurably_under_ten_percent():
+    def evaluate(genomes, seeds):
+        w = network.unpack(genomes)
+        return task.run(lambda r: network.act(w, r), [int(s) for s in seeds], len(seeds),
+                        World(), NoiseModel('none'), task.Task())
+    ea = SteadyStateEA(EAConfig(best='retest'), seed=0)      # the paper's phase 1, no noise
+    evolve([ea], evaluate)
+    w = network.unpack(ea.best_genome[None].repeat(len(SEEDS), axis=0))
+    loss, half = _paired_loss(lambda r: network.act(w, r))
+    assert loss - half > 0              # the whole 95% CI of the loss above zero
 
 
 def test_the_default_emulated_robot_opens_a_gap_for_a_fixed_controller():
