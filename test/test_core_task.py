@@ -10,7 +10,7 @@ from khepera_noise_ros.core.noise import NoiseModel
 
 
 def test_light_response_follows_michels_formula():
-    w = khepera.World(lamp_distance_mm=50.0)
+    w = khepera.World(lamp_distance_mm=50.0, gain=450.0)
     assert w.response(0.0) == pytest.approx(500 - 200 / 250 * 450)
     assert w.response(30.0) == pytest.approx(500 - np.cos(np.radians(45)) * 200 / 250 * 450)
     assert w.response(61.0) == 500.0 and w.response(180.0) == 500.0

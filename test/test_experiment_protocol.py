@@ -78,7 +78,8 @@ def test_every_trial_goes_through_the_five_steps_in_order(tmp_path):
             assert u[5]['genome'] == best4
             assert u[2]['seeds'] == u[3]['seeds'] == u[5]['seeds']  # the same test episodes
             assert len(u[3]['fitness']) == config.test_episodes
-            assert u[1]['evaluations'] == episodes_per_run(config.phase1) == 4 + 3 * 4
+            retests = 4 * config.phase1.retest_episodes if config.phase1.best == 'retest' else 0
+            assert u[1]['evaluations'] == episodes_per_run(config.phase1) == 4 + 3 * 4 + retests
             assert len(u[1]['history']) == config.phase1.generations + 1
             assert 0 <= u[1]['best_generation'] <= config.phase1.generations
             assert all(0.0 <= f <= 1.0 for s in (2, 3, 5) for f in u[s]['fitness'])
@@ -219,3 +220,15 @@ def test_an_interruption_in_reality_resumes_mid_phase_2(tmp_path):
     _, experiment = run(config, tmp_path, backends=again)
     assert again.reality.episodes == left
     assert store.load(config.conditions[0].key, 0, 5) is not None
+
+
+def test_phase_2_re_tests_its_best_on_episodes_apart_from_the_final_test(tmp_path):
+    config = tiny()
+    assert config.phase2.best == 'retest'
+    store, experiment = run(config, tmp_path)
+    spy = experiment.backends.reality
+    tests = {s for c in config.conditions for t in range(config.trials)
+             for s in store.load(c.key, t, 5)['seeds']}
+    step4 = spy.batches[1:-1]       # step 3 first, step 5 last, phase 2 in between
+    evolution = {int(s) for _, seeds in step4 for s in seeds}
+    assert evolution and not evolution & tests

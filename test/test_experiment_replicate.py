@@ -116,3 +116,19 @@ def test_a_killed_run_saves_its_evolutions_part_way(tmp_path):
     assert len(parts) == 4 * TINY['trials']
     assert all(len(json.loads(p.read_text())['told']) > 10 for p in parts)   # generation 1+
     assert not list((out / 'units').rglob('*.tmp'))
+
+
+def test_both_protocols_run_side_by_side_when_asked(tiny, tmp_path, capsys):
+    out = tmp_path / 'run'
+    assert cli.main(['replicate', '--config', str(tiny), '--out', str(out), '--backend', 'core',
+                     '--protocol', 'both', '--no-progress']) == 0
+    printed = capsys.readouterr().out
+    assert '--- protocol: measured' in printed and '--- protocol: paper' in printed
+    measured = yaml.safe_load((out / 'config.yaml').read_text())
+    paper = yaml.safe_load((tmp_path / 'run-paper' / 'config.yaml').read_text())
+    assert (measured['protocol'], paper['protocol']) == ('measured', 'paper')
+    assert paper['phase2']['best'] == 'ever' and paper['reality']['start_bearing_deg'] is None
+    assert measured['phase2']['best'] == 'retest'
+    # the preset comes first, the file after it: what the file sets holds in both
+    assert measured['test_episodes'] == paper['test_episodes'] == TINY['test_episodes']
+    assert (tmp_path / 'run-paper' / 'report.md').exists()

@@ -150,7 +150,7 @@ def test_lost_steps_are_reported_and_declared(ros_context, tmp_path):
         rec, _ = record_command.record(args, context=ros_context, robot=robot)
         # the session's settings are undone: the node is left as it was found
         assert robot.get_parameter('steps').value == 60
-        assert robot.get_parameter('perturbation_deg').value == 30.0
+        assert robot.get_parameter('perturbation_deg').value == Task().perturbation_deg
     finally:
         robot.destroy_node()
     assert rec.step.tolist() == [0, 1, 2, 3]

@@ -52,13 +52,15 @@ def test_dependent_noise_is_synchronous_and_independent_is_not():
                       condition='dependent')
     low = stationary(NoiseModel('combination', 0.02, 0.08), headings=(0.0,), steps=120,
                      condition='independent', first_episode=1, seed=2)
-    results = synchrony.analyse(concatenate([high, low]), pairs=[(2, 3), (1, 6)],
+    # s1 and s4 read alike (mid-range) with the lamp ahead, as the paper's 100 and 110 do;
+    # the facing pair s2, s3 sits at the light's floor, far below its group's average
+    results = synchrony.analyse(concatenate([high, low]), pairs=[(1, 4), (1, 6)],
                                 resamples=400)
     by = {r.condition: r for r in results}
     assert by['dependent'].pairs[0].r > 0.85
     assert by['independent'].pairs[0].r < 0.4
     for result in results:
-        s2_s3, s1_s6 = result.pairs
+        s2_s3, s1_s6 = result.pairs     # (s1, s4) in the first place
         assert s2_s3.bootstrap_ci[0] < s2_s3.r < s2_s3.bootstrap_ci[1]
         assert s2_s3.fisher_ci[0] < s2_s3.r < s2_s3.fisher_ci[1]
         assert abs(s1_s6.r) < 0.3          # s6 is in another dependence group

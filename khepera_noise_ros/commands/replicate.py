@@ -11,6 +11,7 @@ it ends: run the same command again to resume an interrupted run.
 """
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import signal
@@ -46,16 +47,23 @@ def add_arguments(parser) -> None:
     parser.add_argument('--port', action='append', metavar='DEV',
                         help='a real Khepera on this serial port is reality (repeatable: '
                              'one robot per port)')
+    parser.add_argument('--protocol', choices=(*settings.PROTOCOLS, 'both'),
+                        help="measured: 10 test episodes, bests by re-test, reset bearings "
+                             "(the default); paper: section 4.4 as written; both: one run of "
+                             "each (the paper's in OUT-paper)")
     parser.add_argument('--trials', type=int, help='trials per condition (overrides the config)')
     parser.add_argument('--seed', type=int, help="the run's seed (overrides the config)")
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
 
 
 def run(args) -> int:
+    if getattr(args, 'protocol', None) == 'both':
+        return both_protocols(args)
     overrides = {k: v for k, v in (('trials', args.trials), ('seed', args.seed)) if v is not None}
     overrides['backend'] = backend_choice(args.backend, args.port)
-    config = settings.load(args.config, quick=args.quick, overrides=overrides)
-    out = args.out or Path('results/replicate-quick' if args.quick else 'results/replicate')
+    config = settings.load(args.config, quick=args.quick, overrides=overrides,
+                           protocol=getattr(args, 'protocol', None))
+    out = args.out or default_out(args.quick, getattr(args, 'protocol', None))
     store = Store(out, config.hash)
     found = store.open(config.to_yaml(), fresh=args.fresh)
     if found:
@@ -81,6 +89,22 @@ def run(args) -> int:
     print(report.summary(analysis), end='')
     print(f"wrote {out / 'report.md'} ({sessions[-1]['elapsed_s']:.0f} s this session, "
           f"{sum(s['elapsed_s'] for s in sessions):.0f} s in all)")
+    return 0
+
+
+def default_out(quick: bool, protocol: str | None) -> Path:
+    name = 'results/replicate' + ('-quick' if quick else '')
+    return Path(name + ('-paper' if protocol == 'paper' else ''))
+
+
+def both_protocols(args) -> int:
+    """The measured protocol, then the paper's, each in its own directory."""
+    out = args.out or default_out(args.quick, None)
+    for protocol, where in (('measured', out), ('paper', out.with_name(out.name + '-paper'))):
+        print(f'--- protocol: {protocol} ({where})')
+        code = run(argparse.Namespace(**{**vars(args), 'protocol': protocol, 'out': where}))
+        if code:
+            return code
     return 0
 
 
@@ -230,7 +254,8 @@ def _reality(config: settings.ReplicateConfig, ros, ports) -> tuple:
 
 def _world(config: settings.ReplicateConfig) -> EmulatedWorld:
     return EmulatedWorld(config.effects, seed=config.reality['seed'],
-                         robots=config.reality['robots'], geometry=config.world)
+                         robots=config.reality['robots'], geometry=config.world,
+                         start_bearing_deg=config.reality['start_bearing_deg'])
 
 
 def _emulated_robots(config: settings.ReplicateConfig) -> KheperaRobots:

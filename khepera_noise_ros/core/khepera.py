@@ -31,7 +31,7 @@ class World:
 
     lamp_distance_mm: float = 5.0
     ambient: float = 500.0
-    gain: float = 450.0
+    gain: float = 500.0
     reach_mm: float = 250.0
     half_angle_deg: float = 60.0
     floor: float = 50.0

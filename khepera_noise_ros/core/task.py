@@ -36,7 +36,7 @@ class Task:
 
     steps: int = 60
     perturb_every: int = 5
-    perturbation_deg: float = 30.0
+    perturbation_deg: float = 25.0
 
     def __post_init__(self):
         for name, low in (('steps', 1), ('perturb_every', 1)):

@@ -1,11 +1,13 @@
 """Settings of the replication: every number of section 4 and the appendix, in one place.
 
-The defaults reproduce the paper.  A YAML file (``config/replicate.yaml`` is a
-commented copy of the defaults) overrides any of them; keys it does not give
-keep their default, and an unknown key is an error that names it.  ``quick``
-holds the overrides ``--quick`` applies on top.  The settings actually used are
-written next to the results, with a hash that the results store checks on
-resume.
+The defaults are the paper's numbers with the measurement protocol that can detect its
+effect (``protocol: measured``: ten test episodes, bests chosen by re-test, episodes
+from a reset bearing); ``PROTOCOLS['paper']`` is the paper's literal protocol. The
+world's unstated parameters are calibrated (docs/calibration.md). A YAML file
+(``config/replicate.yaml`` is a commented copy of the defaults) overrides any of them;
+keys it does not give keep their default, and an unknown key is an error that names it.
+``quick`` holds the overrides ``--quick`` applies on top. The settings actually used are
+written next to the results, with a hash that the results store checks on resume.
 """
 from __future__ import annotations
 
@@ -29,9 +31,10 @@ SIMULATION_BACKENDS = ('graph', 'core')
 REALITY_BACKENDS = ('emulator', 'world', 'hardware')
 
 DEFAULTS: dict = {
+    'protocol': 'measured',
     'seed': 1998,
     'trials': 10,
-    'test_episodes': 1,
+    'test_episodes': 10,
     'dependence_groups': [list(g) for g in DEFAULT_GROUPS],
     'distribution': 'uniform',
     'levels': [
@@ -41,17 +44,26 @@ DEFAULTS: dict = {
          'combination': {'dependent': 0.05, 'independent': 0.05}, 'independent': 0.10},
     ],
     'phase1': {'population': 25, 'generations': 50, 'init_range': 0.4, 'mutation_range': 1.0,
-               'fitness': 'stored', 'best': 'ever', 'retest_episodes': 5},
+               'fitness': 'stored', 'best': 'retest', 'retest_episodes': 5},
     'phase2': {'population': 10, 'generations': 5, 'init_range': 0.4, 'mutation_range': 1.0,
-               'fitness': 'stored', 'best': 'ever', 'retest_episodes': 5},
-    'task': {'steps': 60, 'perturb_every': 5, 'perturbation_deg': 30.0},
-    'world': {'lamp_distance_mm': 5.0, 'ambient': 500.0, 'gain': 450.0, 'reach_mm': 250.0,
+               'fitness': 'stored', 'best': 'retest', 'retest_episodes': 5},
+    'task': {'steps': 60, 'perturb_every': 5, 'perturbation_deg': 25.0},
+    'world': {'lamp_distance_mm': 5.0, 'ambient': 500.0, 'gain': 500.0, 'reach_mm': 250.0,
               'half_angle_deg': 60.0, 'floor': 50.0, 'deg_per_power': 3.0},
     'backend': {'simulation': 'graph', 'reality': 'emulator'},
     # the emulated robot's world: robots in a batch, its seed, and its effects
     # (a mapping for reality.effects.EffectsConfig.from_dict, or the path of such a file)
-    'reality': {'robots': 40, 'seed': 1, 'effects': {}},
+    # start_bearing_deg: where each real episode starts (null: where the last one ended)
+    'reality': {'robots': 100, 'seed': 1, 'effects': {}, 'start_bearing_deg': 0.0},
     'quick': {'trials': 3},
+}
+# Measurement protocols: overrides laid over the defaults (``measured`` is the defaults).
+# ``paper`` is section 4.4 as written: one test episode, the best single evaluation ever
+# seen, and a real robot left where its last episode ended.
+PROTOCOLS: dict = {
+    'measured': {},
+    'paper': {'test_episodes': 1, 'phase1': {'best': 'ever'}, 'phase2': {'best': 'ever'},
+              'reality': {'start_bearing_deg': None}},
 }
 
 
@@ -117,11 +129,20 @@ class ReplicateConfig:
         return yaml.safe_dump({**head, **self.data}, sort_keys=False)
 
 
-def load(path=None, quick: bool = False, overrides: dict | None = None) -> ReplicateConfig:
-    """Defaults, then the file at ``path``, then ``quick``'s overrides, then ``overrides``."""
+def load(path=None, quick: bool = False, overrides: dict | None = None,
+         protocol: str | None = None) -> ReplicateConfig:
+    """Defaults, then ``protocol``'s preset, then the file at ``path``, then ``quick``'s
+    overrides, then ``overrides``."""
     data = copy.deepcopy(DEFAULTS)
+    given = read_yaml(path) if path is not None else {}
+    protocol = protocol if protocol is not None else given.get('protocol')
+    if protocol is not None:
+        if protocol not in PROTOCOLS:
+            raise ValueError(f'protocol must be one of {sorted(PROTOCOLS)}, got {protocol!r}')
+        data = merge(data, {**PROTOCOLS[protocol], 'protocol': protocol}, 'protocol')
     if path is not None:
-        data = merge(data, read_yaml(path), str(path))
+        data = merge(data, {**given, **({'protocol': protocol} if protocol else {})},
+                     str(path))
     if quick:
         data = merge(data, data['quick'], 'quick')
     if overrides:
@@ -165,6 +186,9 @@ def merge(base: dict, update: dict, source: str, where: str = '') -> dict:
 
 def build(data: dict) -> ReplicateConfig:
     """Check the plain settings and make the typed config; errors name the setting."""
+    if data['protocol'] not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {sorted(PROTOCOLS)}, "
+                         f"got {data['protocol']!r}")
     seed = _integer(data, 'seed', 0)
     trials = _integer(data, 'trials', 2)
     test_episodes = _integer(data, 'test_episodes', 1)
@@ -184,6 +208,11 @@ def build(data: dict) -> ReplicateConfig:
     plain = {k: v for k, v in copy.deepcopy(data).items() if k != 'quick'}
     _integer(plain['reality'], 'robots', 1, 'reality.')
     _integer(plain['reality'], 'seed', 0, 'reality.')
+    start = plain['reality']['start_bearing_deg']
+    if start is not None and (isinstance(start, bool) or not isinstance(start, (int, float))
+                              or not -180.0 <= start <= 180.0):
+        raise ValueError(f'reality.start_bearing_deg must be null or degrees in [-180, 180], '
+                         f'got {start!r}')
     plain['reality']['effects'] = effects_from(plain['reality']['effects']).to_dict()
     return ReplicateConfig(
         data=plain, seed=seed, trials=trials, test_episodes=test_episodes, levels=levels,

@@ -354,8 +354,18 @@ def evolution_result(ea: SteadyStateEA, step: int) -> dict:
     return {'kind': 'evolve', 'world': _world(step),
             'seed_genome': None if ea.seed_genome is None else ea.seed_genome.tolist(),
             'best_genome': ea.best_genome.tolist(), 'best_fitness': ea.best_fitness,
-            'best_generation': ea.best_generation, 'evaluations': ea.evaluations,
+            'best_generation': best_generation(ea), 'evaluations': ea.evaluations,
             'history': [[g.generation, g.best, g.mean, g.evaluations] for g in ea.history]}
+
+
+def best_generation(ea: SteadyStateEA) -> int:
+    """The generation at which the run reached its best fitness (the paper's 35.0 against
+    42.8).  A re-tested or final best is chosen at the end, so for those it is the first
+    generation whose population held the highest fitness of the run."""
+    if ea.config.best == 'ever' or not ea.history:
+        return ea.best_generation
+    best = [g.best for g in ea.history]
+    return ea.history[int(np.argmax(best))].generation
 
 
 @functools.lru_cache(maxsize=8)

@@ -19,7 +19,9 @@ Layout under the output directory::
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import yaml
@@ -89,7 +91,7 @@ class Store:
     def save(self, condition: str, trial: int, step, result: dict) -> None:
         unit = {'format': UNIT_FORMAT, 'config_hash': self.hash, 'condition': condition,
                 'trial': trial, 'step': step, **result}
-        write_json(self.path(condition, trial, step), unit)
+        write_unit(self.path(condition, trial, step), unit)
         self.path(condition, trial, step, '.checkpoint').unlink(missing_ok=True)
 
     def load_checkpoint(self, condition: str, trial: int, step) -> list[float]:
@@ -97,7 +99,7 @@ class Store:
         return [] if data is None else list(data['told'])
 
     def save_checkpoint(self, condition: str, trial: int, step, told: list[float]) -> None:
-        write_json(self.path(condition, trial, step, '.checkpoint'),
+        write_unit(self.path(condition, trial, step, '.checkpoint'),
                    {'format': CHECKPOINT_FORMAT, 'config_hash': self.hash, 'told': told})
 
     def sessions(self) -> list[dict]:
@@ -126,6 +128,28 @@ class Store:
                                    f"{data.get('config_hash')}, now {self.hash}); add --fresh "
                                    f'to discard the old results')
         return data
+
+
+def write_unit(path: Path, data: dict) -> None:
+    """Write a unit or checkpoint atomically (a temporary file renamed into place) but
+    without fsync: hundreds of fsyncs cost seconds on a busy disk, and a file that a
+    power cut leaves empty or cut short is not valid JSON, which ``_read`` takes as not
+    there, so the unit is simply computed again."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
+    try:
+        with os.fdopen(fd, 'w') as f:
+            json.dump(data, f, default=_listed)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _listed(obj):
+    if hasattr(obj, 'tolist'):          # numpy arrays and scalars
+        return obj.tolist()
+    raise TypeError(f'cannot write {type(obj).__name__} as JSON')
 
 
 def _hash_of(config_path: Path) -> str | None:

@@ -150,8 +150,8 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
     scored = _parsimonious(scored, o.alpha)
     result.effects = [s[0] for s in scored]
     best, best_cmp, best_effect, _ = scored[0] if scored else (None, None, None, None)
-    if significant and best is not None and best_effect is not None:
-        if best['heldout_reduction'] >= o.min_reduction and \
+    if significant and best is not None:
+        if best_effect is not None and best['heldout_reduction'] >= o.min_reduction and \
                 best['p_value'] < o.reduction_alpha:
             result.top_effect, result.fitted = best['name'], best_effect
             result.held_out_after = best_cmp
