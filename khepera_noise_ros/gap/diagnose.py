@@ -189,7 +189,8 @@ def _parsimonious(scored: list, alpha: float) -> list:
     return [simplest] + [s for s in scored if s is not simplest]
 
 
-def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Options):
+def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Options,
+           chosen=()):
     """(effects entry, held-out comparison, effect, replicate discrepancies after)."""
     entry = {'name': cand.name, 'sensors': [], 'parameters': {},
              'discrepancy_before': d_before, 'discrepancy_after': d_before,
@@ -197,7 +198,11 @@ def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Opti
              'note': cand.note}
     if cand.effect is None or d_before <= 0:
         return entry, None, cand.effect, None
-    after = b.compare([cand.effect])
+    try:
+        after = b.compare(list(chosen) + [cand.effect])
+    except Exception as exc:      # noqa: BLE001 - the candidate cannot run: not fitting
+        entry['note'] = f'{cand.note}; cannot be scored: {type(exc).__name__}: {exc}'
+        return entry, None, None, None
     after_reps = b.replicate_discrepancies(after)
     reduction = 1.0 - after.discrepancy / d_before
     # Resampling adds noise to both discrepancies, which biases the replicates' reduction

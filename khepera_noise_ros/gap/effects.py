@@ -60,6 +60,9 @@ class SensorGainOffset(_OnSensors):
         g[rows, 0], o[rows, 0] = self.gains, self.offsets
         return lambda level: self.anchor - g * (self.anchor - level) + o
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        return self.process(level.shape[2], level.shape[1], rng)(level)
+
 
 @dataclass(frozen=True)
 class TemporalDrift(_OnSensors):
@@ -87,6 +90,20 @@ class TemporalDrift(_OnSensors):
             return out
         return apply
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        """``process`` over (samples, channels, robots) at once: the AR(1) as a filter."""
+        from scipy.signal import lfilter
+        rows = _rows(self.sensors, level.shape[1])
+        a = float(np.exp(-1.0 / self.time_constant))
+        width = 1 if self.shared else len(rows)
+        z = rng.standard_normal((level.shape[0], width, level.shape[2]))
+        z[0] *= self.sd
+        z[1:] *= np.sqrt(1 - a * a) * self.sd
+        state = lfilter([1.0], [1.0, -a], z, axis=0)
+        out = level.copy()
+        out[:, rows] *= 1.0 + state
+        return out
+
 
 @dataclass(frozen=True)
 class IntensityDependentNoise(_OnSensors):
@@ -111,6 +128,14 @@ class IntensityDependentNoise(_OnSensors):
             return out
         return apply
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        r = np.clip(level[:, rows], 0.0, None)
+        z = rng.standard_normal((level.shape[0], 1, level.shape[2]))
+        out[:, rows] += z * self.strength * r * (r / self.scale) ** self.exponent
+        return out
+
 
 @dataclass(frozen=True)
 class CorrelatedNoise:
@@ -131,6 +156,14 @@ class CorrelatedNoise:
                 out[members] += self.strength * level[members].mean(axis=0) * z[g]
             return out
         return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        groups = [_rows(g, level.shape[1]) for g in self.groups]
+        out = level.copy()
+        z = rng.standard_normal((level.shape[0], len(groups), level.shape[2]))
+        for g, members in enumerate(groups):
+            out[:, members] += (self.strength * level[:, members].mean(axis=1) * z[:, g])[:, None]
+        return out
 
     @property
     def location(self) -> list:
@@ -162,6 +195,13 @@ class SensorLatency(_OnSensors):
             return out
         return apply
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        late = np.maximum(np.arange(level.shape[0]) - self.steps, 0)
+        out[:, rows] = level[late][:, rows]
+        return out
+
 
 @dataclass(frozen=True)
 class SaturationQuantization(_OnSensors):
@@ -183,6 +223,13 @@ class SaturationQuantization(_OnSensors):
                                 self.high)
             return out
         return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        out[:, rows] = np.clip(np.round(level[:, rows] / self.step) * self.step, self.low,
+                               self.high)
+        return out
 
 
 @dataclass(frozen=True)

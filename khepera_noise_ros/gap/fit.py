@@ -34,6 +34,7 @@ from .where import ALPHA, Comparison, holm
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
+MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 
 
 @dataclass
@@ -205,6 +206,7 @@ def _by_condition(c: Comparison, family: str) -> dict:
 
 def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
     """The effect ``make(x)`` with x refined on a log scale around ``start``."""
+    start = float(np.clip(start, 1e-5, 10.0)) if np.isfinite(start) else 0.01
     lo, hi = math.log(start / 3), math.log(start * 3)
     best = _golden(lambda u: target.objective([make(math.exp(u))], kinds), lo, hi,
                    evaluations)
@@ -281,8 +283,10 @@ def drift(target: Target, c: Comparison) -> Candidate:
     sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
 
     def make(x, shared=shared):
-        return fx.TemporalDrift(sensors, round(math.exp(x[0]), 5), round(math.exp(x[1]), 2),
-                                bool(shared))
+        # bounded so that the model can always run: a time constant of 0 has no AR(1)
+        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), 1e-5, 2.0))
+        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), MIN_TIME_CONSTANT, 1e5))
+        return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
                           [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
@@ -387,7 +391,34 @@ FITTERS = {fx.SensorGainOffset.name: gain_offset, fx.SaturationQuantization.name
 
 
 def fit_all(target: Target, c: Comparison, names=tuple(FITTERS)) -> list[Candidate]:
-    return [FITTERS[n](target, c) for n in names]
+    """Every named candidate fitted; one that fails is reported as not fitting."""
+    return [fit_one(n, target, c) for n in names]
+
+
+def fit_one(name: str, target: Target, c: Comparison, fitter=None) -> Candidate:
+    """``FITTERS[name]`` run so that no failure escapes: an exception, or parameters the
+    effect's own model cannot run (checked by a short trial), end as a candidate with
+    no effect and a note saying why; the rest of the diagnosis carries on."""
+    try:
+        cand = (fitter or FITTERS[name])(target, c)
+        if cand.effect is not None:
+            runnable(cand.effect)
+        return cand
+    except Exception as exc:      # noqa: BLE001 - one candidate's failure is its own
+        return Candidate(name, None, f'the fit failed: {type(exc).__name__}: {exc}')
+
+
+def runnable(effect) -> None:
+    """Raise ValueError unless ``effect`` passes its checks and runs a few steps."""
+    effect = fx.from_dict(fx.to_dict(effect))
+    if effect.stage == 'turn':
+        out = effect.process(2, 8, np.random.default_rng(0))(np.array([10.0, -10.0]))
+    else:
+        channels = max([8] + [s + 1 for s in effect.sensors])
+        apply = effect.process(2, channels, np.random.default_rng(0))
+        out = [apply(np.full((channels, 2), 200.0)) for _ in range(3)][-1]
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f'{effect.name} gives non-finite readings with {fx.to_dict(effect)}')
 
 
 def _names(sensors) -> str:
