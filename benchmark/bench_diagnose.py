@@ -24,8 +24,7 @@ for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(var, '1')
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from blind_gap import (REPEATS, SAMPLES, SENSOR_NOISE, STATIONARY,  # noqa: E402
-                       record_stationary, robot)
+from blind_gap import REPEATS, SAMPLES, STATIONARY, record_stationary, robot  # noqa: E402
 
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.gap import diagnose  # noqa: E402
@@ -41,8 +40,11 @@ def recording(samples: int, seed: int = 0):
 
 
 def timed(rec, seed: int = 0) -> tuple[float, diagnose.Diagnosis]:
-    options = diagnose.Options(config=SimConfig(noise=NoiseModel.independent_only(
-        SENSOR_NOISE)), seed=seed)
+    """The simulator is the paper's independent model at the robot's own sensor noise,
+    so the gap is the robot's effects."""
+    noise = EffectsConfig.real_robot().sensor_noise
+    options = diagnose.Options(config=SimConfig(noise=NoiseModel.independent_only(noise)),
+                               seed=seed)
     t0 = time.perf_counter()
     result = diagnose.diagnose([rec], options)
     return time.perf_counter() - t0, result
@@ -64,8 +66,10 @@ def main(argv=None) -> int:
         for k in range(args.repeat):
             seconds, result = timed(rec, k)
             times.append(seconds)
-        chosen = [c['name'] for c in (result.compound or {}).get('chosen', [])]
-        shrink = (result.compound or {}).get('heldout_reduction')
+        summary = result.to_json().get('compound') or {}
+        chosen = [f"{c['name']} {c['cumulative_reduction']:.2f}"
+                  for c in summary.get('chosen', [])]
+        shrink = summary.get('heldout_reduction')
         print(f'{label:8s} {len(rec):6d} samples x {rec.channels} sensors: diagnose '
               f'{min(times):6.2f} s (best of {len(times)}); top {result.top_effect}; '
               f'compound {chosen} shrink '

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recording import Recording
 from . import effects as fx
-from . import fit, replay, split, transfer
+from . import compound, fit, replay, split, transfer
 from .simconfig import SimConfig
 from .target import Target
 from .where import ALPHA, Comparison, entries, localise
@@ -51,6 +51,7 @@ class Options:
     replicates: int = 200
     effects: tuple = fx.NAMES
     where_limit: int = 40
+    compound: bool = True         # forward selection of a set of effects after the best one
 
 
 @dataclass
@@ -67,7 +68,15 @@ class Diagnosis:
     held_out_after: Comparison | None = None
     transfer: dict | None = None
     inputs: list = field(default_factory=list)
-    combined: dict | None = None     # the top two effects together, when both count
+    combined: dict | None = None     # the chosen effects together (the compound's summary)
+    compound: compound.Compound | None = None
+
+    @property
+    def fitted_effects(self) -> list:
+        """What fitted_params.yaml loads: the compound set, else the top effect."""
+        if self.compound is not None:
+            return list(self.compound.effects)
+        return [] if self.fitted is None else [self.fitted]
 
     def to_json(self) -> dict:
         transfer = self.transfer or {'fitness_gap_before': None, 'fitness_gap_after': None,
@@ -76,6 +85,7 @@ class Diagnosis:
                 'top_effect': self.top_effect, 'transfer': transfer,
                 'gap_significant': self.gap_significant, 'combined': self.combined,
                 'localisation': self.localisation,
+                'compound': None if self.compound is None else self.compound.to_json(),
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -155,7 +165,17 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                 best['p_value'] < o.reduction_alpha:
             result.top_effect, result.fitted = best['name'], best_effect
             result.held_out_after = best_cmp
-            result.combined = _combined(b, scored, d_before, o)
+            if o.compound:
+                result.compound = compound.select(
+                    a, b, (best_effect, best['note'], best_cmp, scored[0][3]), o.effects,
+                    d_before, before_reps)
+                result.held_out_after = result.compound.comparison
+                result.combined = {'effects': [e.name for e in result.compound.effects],
+                                   'discrepancy_before': d_before,
+                                   'discrepancy_after': result.compound.discrepancy_after,
+                                   'heldout_reduction': result.compound.reduction}
+            else:
+                result.combined = _combined(b, scored, d_before, o)
         else:
             notes.append(f'no effect explains a significant part of the gap: the best, '
                          f'{best["name"]}, removes {best["heldout_reduction"]:.0%} of the '
@@ -189,8 +209,7 @@ def _parsimonious(scored: list, alpha: float) -> list:
     return [simplest] + [s for s in scored if s is not simplest]
 
 
-def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Options,
-           chosen=()):
+def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Options):
     """(effects entry, held-out comparison, effect, replicate discrepancies after)."""
     entry = {'name': cand.name, 'sensors': [], 'parameters': {},
              'discrepancy_before': d_before, 'discrepancy_after': d_before,
@@ -199,7 +218,7 @@ def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Opti
     if cand.effect is None or d_before <= 0:
         return entry, None, cand.effect, None
     try:
-        after = b.compare(list(chosen) + [cand.effect])
+        after = b.compare([cand.effect])
     except Exception as exc:      # noqa: BLE001 - the candidate cannot run: not fitting
         entry['note'] = f'{cand.note}; cannot be scored: {type(exc).__name__}: {exc}'
         return entry, None, None, None

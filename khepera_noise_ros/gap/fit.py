@@ -27,7 +27,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from .groups import cluster, excess_evidence
+from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
 from .where import ALPHA, Comparison, holm
@@ -167,10 +167,22 @@ def _grid(x: np.ndarray) -> int:
 
 # --- correlated_noise ------------------------------------------------------------------
 
+def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndarray:
+    """Excess correlation of the fast (or slow) part of the residuals, real against
+    simulated, from the stationary recordings; the comparison's own correlations (the
+    whole residual) when there are none."""
+    channels = _channels(target)
+    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    if not real:
+        return excess_evidence(c, channels)[0]
+    sim = target.simulate(kinds=('stationary',))
+    return part_evidence(real, sim, channels, part)[0]
+
+
 def correlated(target: Target, c: Comparison) -> Candidate:
     name = fx.CorrelatedNoise.name
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c)
     groups = [tuple(channels[i] for i in g) for g in cluster(evidence)]
     if not groups:
         return Candidate(name, None, 'no sensors whose noise is more correlated than simulated')
@@ -267,7 +279,7 @@ def drift(target: Target, c: Comparison) -> Candidate:
         return Candidate(name, None, 'no extra autocorrelation over time and no level '
                                      'offsets beyond a fixed calibration')
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
     shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
         > Z_DETECT

@@ -25,12 +25,13 @@ def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {'diagnosis': write_json(out / 'diagnosis.json', diagnosis.to_json())}
-    if diagnosis.fitted is not None:
+    fitted = diagnosis.fitted_effects
+    if fitted:
+        names = ', '.join(e.name for e in fitted)
         paths['params'] = simconfig.write(
-            config.with_effects(diagnosis.fitted), out / 'fitted_params.yaml',
-            header=f'khepera-noise diagnose: the simulator with the fitted '
-                   f'{diagnosis.top_effect}\nload with: --ros-args --params-file '
-                   f'fitted_params.yaml')
+            config.with_effects(*fitted), out / 'fitted_params.yaml',
+            header=f'khepera-noise diagnose: the simulator with the fitted {names}\n'
+                   f'load with: --ros-args --params-file fitted_params.yaml')
     drawn = draw(diagnosis, out) if figures else {}
     paths.update(drawn)
     paths['report'] = atomic_write_text(out / 'report.md', markdown(diagnosis, drawn, paths))

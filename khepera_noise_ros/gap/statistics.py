@@ -252,20 +252,29 @@ def _cell_modes(x: np.ndarray, cell: np.ndarray, cells: int) -> np.ndarray:
     return counts.reshape(cells, channels, span).argmax(axis=2) + low
 
 
-def _modal_residues(x: np.ndarray) -> np.ndarray:
+def _residues(x: np.ndarray) -> np.ndarray:
+    """(N, C, len(MODULI)) int16 residues of integer readings modulo each step (a table
+    lookup: readings are small integers)."""
+    low = int(np.nanmin(x)) if x.size else 0
+    span = int(np.nanmax(x)) - low + 1 if x.size else 1
+    table = np.mod(np.arange(low, low + span)[:, None], np.array(MODULI)[None, :])
+    return table.astype(np.int16)[x.astype(np.int64) - low]
+
+
+def _modal_residues(x: np.ndarray, residues: np.ndarray | None = None) -> np.ndarray:
     """(C, len(MODULI)) the most common residue of each channel modulo each step."""
-    columns = np.arange(x.shape[1])
+    r = _residues(x) if residues is None else residues
     out = np.zeros((x.shape[1], len(MODULI)), np.int64)
+    columns = np.arange(x.shape[1])
     for j, q in enumerate(MODULI):
-        code = (np.mod(x, q).astype(np.int64) + q * columns).ravel()
+        code = (r[:, :, j].astype(np.int64) + q * columns).ravel()
         out[:, j] = np.bincount(code, minlength=q * x.shape[1]).reshape(-1, q).argmax(axis=1)
     return out
 
 
 def _residue_hits(x: np.ndarray, modal: np.ndarray) -> np.ndarray:
     """(N, C, len(MODULI)) 1 where a reading falls in its channel's modal residue class."""
-    return np.stack([np.mod(x, q) == modal[:, j] for j, q in enumerate(MODULI)],
-                    axis=2).astype(np.float64)
+    return (_residues(x) == modal[None]).astype(np.float64)
 
 
 # -- closed loop --------------------------------------------------------------------------

@@ -10,6 +10,7 @@ deterministic function of the effect's parameters.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,6 +22,7 @@ from .statistics import Stats
 from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, standard_error
 
 SIM_COPIES = 3
+SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of copies
 
 
 @dataclass
@@ -29,13 +31,17 @@ class Target:
     config: SimConfig
     seed: int = 0
     base: str = 'auto'
-    copies: int = SIM_COPIES
+    copies: int | None = None     # simulated copies of the recordings; None: by size
     replicates: int = statistics.REPLICATES
     block_lengths: list[int] = field(default_factory=list)
+    given: tuple = ()             # effects already chosen: the simulator always has them
     real: Stats = field(init=False)
     kinds: list[str] = field(init=False)
 
     def __post_init__(self):
+        if self.copies is None:       # enough simulated samples, not more: fits cost less
+            n = sum(len(r) for r in self.recordings)
+            self.copies = int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
         if not self.block_lengths:
             self.block_lengths = [_block_length(r) for r in self.recordings]
         self.kinds = [replay.kind(r) for r in self.recordings]
@@ -49,6 +55,7 @@ class Target:
 
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
+        effects = tuple(self.given) + tuple(effects)
         return [replay.replay(self.recordings[i], self.config, effects,
                               seed=self.seed + 7919 * i, replicates=copies, base=self.base)
                 for i in self._chosen(kinds)]
@@ -76,24 +83,35 @@ class Target:
         between copies is its true sampling variance under the simulated model; its
         ratio to the real data's bootstrap variance, pooled over the levels of a
         condition, scales the variance of those levels on both sides (never below 1).
+        Cell means per copy come straight from the readings (one pass, no statistics).
         """
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or self.copies < 2:
             return factor
         span = int(self.recordings[i].episode.max()) + 1
-        copies = [statistics.compute(_blocks(sim.select(sim.episode // span == k),
-                                             self.block_lengths[i], self.config), 0)
-                  for k in range(self.copies)]
+        labels, cell = statistics.cells(sim)
+        copy = sim.episode // span
+        used = list(self.recordings[i].channels_used)
+        code = cell * self.copies + copy
+        size = len(labels) * self.copies
+        count = np.bincount(code, minlength=size).reshape(len(labels), self.copies)
+        x = sim.readings[:, used]
+        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(len(used))],
+                         axis=1).reshape(len(labels), self.copies, len(used))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            means /= count[..., None]
+        spread = np.var(means, axis=1, ddof=1)                    # (cells, channels)
         real = self._real[i]
         real_index = real.index()
-        spread = np.var(np.stack([c.estimate for c in copies]), axis=0, ddof=1)
-        index = copies[0].index()
         by_condition: dict = {}
-        for key in pooled.keys:
-            if key.family == 'level' and key in real_index and key in index:
-                acc = by_condition.setdefault(key.condition, [0.0, 0.0])
-                acc[0] += spread[index[key]]
-                acc[1] += real.variance[real_index[key]]
+        for c, (cond, h) in enumerate(labels):
+            part = None if h is None else f'heading {h:g} deg'
+            for k, sensor in enumerate(used):
+                key = statistics.Key('level', (sensor,), cond, part)
+                if key in real_index and np.isfinite(spread[c, k]):
+                    acc = by_condition.setdefault(cond, [0.0, 0.0])
+                    acc[0] += spread[c, k]
+                    acc[1] += real.variance[real_index[key]]
         ratio = {c: float(np.clip(a / b, 1.0, 1e4)) if b > 0 else 1.0
                  for c, (a, b) in by_condition.items()}
         for j, key in enumerate(pooled.keys):
@@ -101,9 +119,17 @@ class Target:
                 factor[j] = ratio.get(key.condition, 1.0)
         return factor
 
-    def compare(self, effects=()) -> Comparison:
+    def with_given(self, effects) -> 'Target':
+        """This target with ``effects`` always in the simulator (real statistics shared):
+        a candidate fitted against it is fitted jointly with them."""
+        out = copy.copy(self)
+        out.given = tuple(effects)
+        return out
+
+    def compare(self, effects=(), replicates: int | None = None) -> Comparison:
         """Real against simulated-with-``effects``, bootstrap variance on both sides."""
-        sim, factor = self._simulated(effects, self.replicates, None)
+        replicates = self.replicates if replicates is None else replicates
+        sim, factor = self._simulated(effects, replicates, None)
         return compare(self.real, sim, factor)
 
     def objective(self, effects=(), kinds=None, families=None, margin=MARGIN) -> float:
