@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recording import Recording
 from . import effects as fx
-from . import compound, fit, replay, split, transfer
+from . import compound, fit, remainder, replay, split, transfer
 from .simconfig import SimConfig
 from .target import Target
 from .where import ALPHA, Comparison, entries, localise
@@ -52,6 +52,7 @@ class Options:
     effects: tuple = fx.NAMES
     where_limit: int = 40
     compound: bool = True         # forward selection of a set of effects after the best one
+    remainder: bool = True        # describe what is left and fit the empirical model
 
 
 @dataclass
@@ -70,6 +71,8 @@ class Diagnosis:
     inputs: list = field(default_factory=list)
     combined: dict | None = None     # the chosen effects together (the compound's summary)
     compound: compound.Compound | None = None
+    remainder: dict | None = None    # what the named effects leave (held out), empirical model
+    empirical: object | None = None  # the empirical model, when it brings the simulator closer
 
     @property
     def fitted_effects(self) -> list:
@@ -86,6 +89,7 @@ class Diagnosis:
                 'gap_significant': self.gap_significant, 'combined': self.combined,
                 'localisation': self.localisation,
                 'compound': None if self.compound is None else self.compound.to_json(),
+                'remainder': self.remainder,
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -181,10 +185,35 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                          f'{best["name"]}, removes {best["heldout_reduction"]:.0%} of the '
                          f'held-out discrepancy, p = {best["p_value"]:.3f} (needs '
                          f'{o.min_reduction:.0%}, p < {o.reduction_alpha})')
+    if significant and o.remainder:
+        _remainder(result, a, b, d_before, o)
     if result.fitted is not None and reality is not None and transfer_trials:
         result.transfer = _transfer(recordings, o, result.fitted, reality, transfer_trials,
                                     transfer_ea)
     return result
+
+
+def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:
+    """What the named effects leave on held-out data, and the empirical model of it."""
+    named = result.fitted_effects
+    after = result.held_out_after if named else result.held_out_before
+    out = remainder.describe(after, d_before, o.alpha)
+    out['named_effects'] = [e.name for e in named]
+    out['heldout_reduction_named'] = 1.0 - after.discrepancy / d_before if d_before > 0 \
+        else 0.0
+    try:
+        empirical = remainder.fit(a.with_given(named))
+        with_empirical = b.compare(named + [empirical]) if empirical is not None else None
+    except Exception as exc:      # noqa: BLE001 - the fallback failing leaves the rest
+        empirical, with_empirical = None, None
+        out['note'] = f'the empirical model could not be fitted: {type(exc).__name__}: {exc}'
+    if empirical is not None:
+        out['empirical'] = fx.to_dict(empirical)
+        out['heldout_reduction_with_empirical'] = 1.0 - with_empirical.discrepancy / d_before \
+            if d_before > 0 else 0.0
+        if with_empirical.discrepancy < after.discrepancy:
+            result.empirical = empirical
+    result.remainder = out
 
 
 def _parsimonious(scored: list, alpha: float) -> list:

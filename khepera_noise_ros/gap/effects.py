@@ -259,9 +259,75 @@ class ActuatorTurnError:
         return ()
 
 
+@dataclass(frozen=True)
+class EmpiricalNoise(_OnSensors):
+    """The remainder no named effect explains, as measured (not a vocabulary name).
+
+    Fast part: per sensor an extra sd (readings) interpolated over ``levels`` from
+    ``spread`` (one row of knots per sensor), mixed across the sensors by the lower
+    triangular ``mixing`` (the fast part's correlation).  Slow part: an AR(1) of
+    correlation time ``slow_time_constant`` samples moving each sensor's gain by
+    ``slow_sd`` (fraction), mixed by ``slow_mixing``.
+    """
+
+    name: ClassVar[str] = 'empirical_noise'
+    stage: ClassVar[str] = 'light'
+    sensors: tuple = ()
+    levels: tuple = (0.0, 525.0)
+    spread: tuple = ()
+    mixing: tuple = ()
+    slow_sd: tuple = ()
+    slow_time_constant: float = 30.0
+    slow_mixing: tuple = ()
+
+    def _arrays(self):
+        n = len(self.sensors)
+        spread = np.asarray(self.spread, float).reshape(n, len(self.levels))
+        mix = np.asarray(self.mixing, float).reshape(n, n) if self.mixing else np.eye(n)
+        slow = np.asarray(self.slow_sd, float) if self.slow_sd else np.zeros(n)
+        smix = np.asarray(self.slow_mixing, float).reshape(n, n) if self.slow_mixing \
+            else np.eye(n)
+        return spread, mix, slow, smix
+
+    def _fast(self, level_rows: np.ndarray, z: np.ndarray, spread, mix) -> np.ndarray:
+        sd = np.stack([np.interp(level_rows[k], self.levels, spread[k])
+                       for k in range(len(self.sensors))])
+        return sd * np.einsum('ij,j...->i...', mix, z)
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+        spread, mix, slow, smix = self._arrays()
+        a = float(np.exp(-1.0 / self.slow_time_constant))
+        state = smix @ rng.standard_normal((len(rows), robots))
+
+        def apply(level):
+            nonlocal state
+            out = level.copy()
+            out[rows] = level[rows] * (1.0 + slow[:, None] * state) + self._fast(
+                level[rows], rng.standard_normal((len(rows), robots)), spread, mix)
+            state = a * state + np.sqrt(1 - a * a) * (smix @ rng.standard_normal(state.shape))
+            return out
+        return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        from scipy.signal import lfilter
+        rows = _rows(self.sensors, level.shape[1])
+        spread, mix, slow, smix = self._arrays()
+        a = float(np.exp(-1.0 / self.slow_time_constant))
+        t, n, r = level.shape[0], len(rows), level.shape[2]
+        z = np.einsum('ij,tjr->tir', smix, rng.standard_normal((t, n, r)))
+        z[1:] *= np.sqrt(1 - a * a)
+        state = lfilter([1.0], [1.0, -a], z, axis=0)
+        fast = self._fast(level[:, rows].transpose(1, 0, 2),
+                          rng.standard_normal((n, t, r)), spread, mix).transpose(1, 0, 2)
+        out = level.copy()
+        out[:, rows] = level[:, rows] * (1.0 + slow[None, :, None] * state) + fast
+        return out
+
+
 TYPES = {cls.name: cls for cls in (CorrelatedNoise, IntensityDependentNoise, SensorGainOffset,
                                    TemporalDrift, ActuatorTurnError, SensorLatency,
-                                   SaturationQuantization)}
+                                   SaturationQuantization, EmpiricalNoise)}
 
 
 def parameters(effect) -> dict:
@@ -308,6 +374,19 @@ def _check(effect) -> None:
                                                      effect.low >= effect.high):
         raise ValueError(f'saturation_quantization needs step > 0 and low < high, got '
                          f'{parameters(effect)}')
+    if effect.name == 'empirical_noise':
+        n = len(effect.sensors)
+        if len(effect.levels) < 1 or len(effect.spread) != n * len(effect.levels) or \
+                len(effect.mixing) not in (0, n * n) or len(effect.slow_sd) not in (0, n) or \
+                len(effect.slow_mixing) not in (0, n * n) or effect.slow_time_constant <= 0 \
+                or list(effect.levels) != sorted(effect.levels):
+            raise ValueError('empirical_noise needs sorted levels, one spread per sensor and '
+                             'level, n x n mixings, one slow_sd per sensor and '
+                             'slow_time_constant > 0')
+        if not all(np.all(np.isfinite(np.asarray(v, float))) for v in (
+                effect.levels, effect.spread, effect.mixing, effect.slow_sd,
+                effect.slow_mixing)):
+            raise ValueError('empirical_noise: values must be finite')
     if effect.name == 'temporal_drift' and effect.time_constant <= 0:
         raise ValueError(f'temporal_drift time_constant must be > 0, got '
                          f'{effect.time_constant}')

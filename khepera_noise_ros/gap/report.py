@@ -32,6 +32,13 @@ def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool 
             config.with_effects(*fitted), out / 'fitted_params.yaml',
             header=f'khepera-noise diagnose: the simulator with the fitted {names}\n'
                    f'load with: --ros-args --params-file fitted_params.yaml')
+    if diagnosis.empirical is not None:
+        paths['params_with_remainder'] = simconfig.write(
+            config.with_effects(*fitted, diagnosis.empirical),
+            out / 'fitted_params_with_remainder.yaml',
+            header='khepera-noise diagnose: the fitted effects plus the empirical model of '
+                   'what they leave\nload with: --ros-args --params-file '
+                   'fitted_params_with_remainder.yaml')
     drawn = draw(diagnosis, out) if figures else {}
     paths.update(drawn)
     paths['report'] = atomic_write_text(out / 'report.md', markdown(diagnosis, drawn, paths))

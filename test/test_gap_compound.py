@@ -1,0 +1,98 @@
+"""Compound diagnosis: several effects at once, found as a set, and what is left.
+
+The 'robot' is the simulator with hidden effects (``test_gap_support.recorded``);
+the diagnosis sees only the recording and the plain simulator's configuration.
+"""
+import numpy as np
+
+from khepera_noise_ros.gap import diagnose, remainder, replay
+from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.gap.target import Target
+from test_gap_support import CONFIG, recorded, stationary_protocol
+
+OPTIONS = diagnose.Options(config=CONFIG, replicates=60)
+PAIRS = ((0, 5), (1, 3), (2, 7), (4, 6))        # not adjacent: found from data alone
+
+
+def test_pairs_of_fast_noise_and_a_slow_shared_change_come_out_as_two_effects():
+    """Sensors share fast noise in pairs while a slow change (room light) moves all of
+    them: the groups are the pairs, the slow change is temporal_drift shared by all,
+    and the compound shrinks the held-out discrepancy by at least 0.7."""
+    hidden = [fx.CorrelatedNoise(PAIRS, 0.02), fx.TemporalDrift(tuple(range(8)), 0.02, 40.0, True)]
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=60), hidden, seed=5)],
+                               OPTIONS)
+    chosen = result.to_json()['compound']['chosen']
+    names = [c['name'] for c in chosen]
+    assert set(names) == {'correlated_noise', 'temporal_drift'}, names
+    groups = next(c for c in chosen if c['name'] == 'correlated_noise')['parameters']['groups']
+    assert sorted(map(sorted, groups)) == sorted(map(list, PAIRS))
+    drift = next(c for c in chosen if c['name'] == 'temporal_drift')
+    assert drift['parameters']['shared'] and drift['sensors'] == list(range(8))
+    assert result.compound.reduction >= 0.7
+    # added shrinks add up to the cumulative one, in order
+    assert abs(chosen[-1]['cumulative_reduction'] - sum(c['added_reduction'] for c in chosen)) \
+        < 1e-9
+    # the compound is what the simulator gets, and it beats the best single effect
+    assert [e.name for e in result.fitted_effects] == names
+    assert result.compound.reduction > result.effects[0]['heldout_reduction']
+    assert result.to_json()['top_effect'] == result.effects[0]['name']
+
+
+def test_a_single_effect_is_not_padded_with_others():
+    hidden = [fx.CorrelatedNoise(((1, 2, 3),), 0.02)]
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=20), hidden, seed=5)],
+                               OPTIONS)
+    assert [c['name'] for c in result.to_json()['compound']['chosen']] == ['correlated_noise']
+
+
+def test_the_remainder_says_what_is_off_and_the_empirical_model_closes_it():
+    """Noise that grows with brightness (the vocabulary's flicker grows with darkness)
+    and is per sensor: the named effects leave part of it; the empirical model, fitted
+    on one part, shrinks the held-out discrepancy further and loads as an effect."""
+    bright = fx.EmpiricalNoise(tuple(range(8)), (0.0, 250.0, 525.0), tuple([12.0, 5.0, 0.5] * 8))
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=40), [bright], seed=5)],
+                               OPTIONS)
+    rem = result.to_json()['remainder']
+    assert rem is not None and 'empirical' in rem
+    assert rem['heldout_reduction_with_empirical'] > rem['heldout_reduction_named']
+    assert rem['heldout_reduction_with_empirical'] > 0.5
+    loaded = fx.loads(fx.dumps([result.empirical]))[0]
+    assert loaded == result.empirical
+    spread = np.asarray(loaded.spread).reshape(8, -1)
+    assert (spread[:, 0] > spread[:, -1]).all()      # larger where it is bright
+
+
+def test_the_empirical_model_measures_a_known_remainder():
+    hidden = fx.EmpiricalNoise((0, 1, 2), (0.0, 525.0), (6.0, 6.0) * 3)
+    rec = recorded(stationary_protocol(samples=60), [hidden], seed=3)
+    model = remainder.fit(Target([rec], CONFIG, 1, replicates=20))
+    spread = np.asarray(model.spread).reshape(8, -1)
+    assert np.all(np.abs(spread[:3] - 6.0) < 2.0), spread[:3]
+    assert spread[3:].mean() < 1.5 and spread[3:].max() < 4.0, spread[3:]   # chance only
+
+
+def test_over_time_matches_the_stepwise_process():
+    """The vectorised replay is the same process as the step-by-step one."""
+    rng = np.random.default_rng(0)
+    level = rng.uniform(50, 500, (30, 8, 4))
+    for effect in (fx.SensorLatency((1, 2), 2), fx.SensorGainOffset((3,), (1.1,), (4.0,)),
+                   fx.SaturationQuantization((0, 5), 40.0, 400.0, 4.0)):
+        step = effect.process(4, 8, rng)
+        stepwise = np.stack([step(level[t]) for t in range(30)])
+        np.testing.assert_allclose(effect.over_time(level, rng), stepwise)
+    drift = fx.TemporalDrift((0,), 0.05, 10.0, True)
+    flat = np.full((20000, 8, 1), 100.0)
+    out = drift.over_time(flat, np.random.default_rng(1))[:, 0, 0] / 100.0 - 1.0
+    assert abs(out.std() - 0.05) < 0.01
+    lag1 = np.corrcoef(out[:-1], out[1:])[0, 1]
+    assert abs(lag1 - np.exp(-0.1)) < 0.03
+
+
+def test_replay_of_an_empirical_effect_runs_in_the_closed_loop_simulator_too():
+    from khepera_noise_ros.gap.simulate import EffectEpisodes
+    from test_gap_support import closed_loop_protocol
+    e = fx.EmpiricalNoise(tuple(range(8)), (0.0, 525.0), (3.0, 3.0) * 8)
+    rec = replay.replay(closed_loop_protocol(4), SimConfig(), [e], seed=1)
+    assert np.isfinite(rec.readings).all()
+    EffectEpisodes(effects=[e]).reset(np.arange(3))
