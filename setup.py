@@ -22,7 +22,10 @@ setup(
         'wheels': ['ros-rclpy[fastrtps]', 'ros-std-msgs', 'ros-sensor-msgs'],
         # rosbag2 (MCAP) recordings without the ROS C++ stack.
         'bags': ['rosbags'],
-        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8'],
+        # hypothesis: fuzzing the gap fitters; arch and allantools: reference implementations
+        # the block-length rule and the Allan deviation are checked against (tests only).
+        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'hypothesis', 'arch',
+                 'allantools'],
     },
     zip_safe=True,
     maintainer='khepera_noise_ros maintainers',

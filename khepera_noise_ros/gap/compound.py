@@ -23,7 +23,7 @@ from . import effects as fx
 from . import fit
 from .target import Target
 
-MIN_ADDED = 0.02          # share of the discrepancy before any effect a step must remove
+MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 2                 # candidates per step fitted jointly with the chosen ones

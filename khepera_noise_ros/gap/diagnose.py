@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recording import Recording
 from . import effects as fx
-from . import compound, fit, remainder, replay, split, transfer
+from . import allan, compound, fit, remainder, replay, split, transfer
 from .simconfig import SimConfig
 from .target import Target
 from .where import ALPHA, Comparison, entries, localise
@@ -73,6 +73,7 @@ class Diagnosis:
     compound: compound.Compound | None = None
     remainder: dict | None = None    # what the named effects leave (held out), empirical model
     empirical: object | None = None  # the empirical model, when it brings the simulator closer
+    allan: dict | None = None        # Allan deviation profiles, real and simulated (gap.allan)
 
     @property
     def fitted_effects(self) -> list:
@@ -90,6 +91,7 @@ class Diagnosis:
                 'localisation': self.localisation,
                 'compound': None if self.compound is None else self.compound.to_json(),
                 'remainder': self.remainder,
+                'allan': self.allan,
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -141,6 +143,7 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
     result = Diagnosis(entries(c_full, o.where_limit, o.alpha), localise(c_full, o.alpha), [],
                        'none', None, significant, notes, c_full,
                        inputs=[_describe(r) for r in recordings])
+    result.allan = _allan(full)
     if not significant:
         notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
                      f'from the simulator at family-wise alpha {o.alpha} (Holm)')
@@ -214,6 +217,16 @@ def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Opti
         if with_empirical.discrepancy < after.discrepancy:
             result.empirical = empirical
     result.remainder = out
+
+
+def _allan(full: Target) -> dict | None:
+    """Allan deviation profiles of the stationary recordings, real and simulated."""
+    real = [r for r, k in zip(full.recordings, full.kinds) if k == 'stationary']
+    if not real:
+        return None
+    sim = full.simulate(kinds=('stationary',), copies=1)
+    factors = allan.taus(max(r.size for r in replay.runs(real[0])))
+    return allan.compare(allan.profile(real[0], factors), allan.profile(sim[0], factors))
 
 
 def _parsimonious(scored: list, alpha: float) -> list:

@@ -119,9 +119,9 @@ def fit(target: Target) -> fx.EmpiricalNoise | None:
     slow_extra = np.clip(np.diag(mr['slow'] - ms['slow']), 0.0, None)
     slow_sd = np.sqrt(slow_extra / np.clip(mr['level2'], 1.0, None))
     with np.errstate(invalid='ignore', divide='ignore'):
-        rho = np.nanmedian(np.clip((mr['lag'] - ms['lag']) / np.where(slow_extra > 0,
-                                                                         slow_extra, np.nan),
-                                   0.01, 0.99))
+        ratio = (mr['lag'] - ms['lag']) / np.where(slow_extra > 0, slow_extra, np.nan)
+        rho = np.nanmedian(np.clip(ratio, 0.01, 0.99)) if np.isfinite(ratio).any() \
+            else np.nan
     tau = -SLOW_WINDOW / math.log(rho) if np.isfinite(rho) else 30.0
     slow_cov = mr['slow'] - ms['slow']
     slow_mix = _factor(slow_cov) if np.all(np.diag(slow_cov) > 0) else np.eye(n)

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
+from . import blocklength
 
 LAGS = (1, 3)                    # autocorrelation lags, in steps
 MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity family
@@ -127,25 +128,19 @@ def units(rec: Recording, cell: np.ndarray) -> list[np.ndarray]:
 
 
 def block_length(rec: Recording, channels) -> int:
-    """Blocks twice the integrated autocorrelation time of the residuals, at least 5."""
+    """The project's one block-length rule (``gap.blocklength``) over the residuals of
+    each run; at least 5 samples (a block carries spreads and lagged products), at
+    most half the longest run."""
     labels, cell = cells(rec)
-    runs = units(rec, cell)
-    x = rec.readings[:, list(channels)]
-    longest = max((r.size for r in runs), default=1)
-    acf = []
-    for lag in range(1, max(2, longest // 4)):
-        num = den = 0.0
-        for r in runs:
-            y = x[r] - x[r].mean(axis=0)
-            if r.size > lag:
-                num += float((y[:-lag] * y[lag:]).sum())
-            den += float((y * y).sum())
-        rho = num / den if den > 0 else 0.0
-        if rho < 0.05:
-            break
-        acf.append(rho)
-    tau = 1.0 + 2.0 * sum(acf)
-    return int(min(max(5, int(np.ceil(2 * tau))), max(2, longest // 2)))
+    runs = [r for r in units(rec, cell) if r.size >= 2]
+    if not runs:
+        return 5
+    x = rec.readings[:, list(channels)].astype(np.float64)
+    y = np.concatenate([x[r] - x[r].mean(axis=0) for r in runs])
+    edges = np.cumsum([0] + [r.size for r in runs])
+    segments = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    longest = max(r.size for r in runs)
+    return blocklength.block_length(y, segments, minimum=5, maximum=max(5, longest // 2))
 
 
 def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
