@@ -107,8 +107,10 @@ class TemporalDrift(_OnSensors):
 
 @dataclass(frozen=True)
 class IntensityDependentNoise(_OnSensors):
-    """A flicker all ``sensors`` see at once, larger the darker the reading:
-    reading += z * strength * r * (r / scale) ** exponent, z ~ N(0, 1) shared."""
+    """Noise whose sd follows a spread law of the level r (``gap.spreadlaw``):
+    sd = constant + strength * u * (u / scale) ** exponent, u = r ('dark': larger the
+    darker the reading, a room's flicker) or scale - r ('bright'); one draw for all
+    ``sensors`` at once if ``shared`` (a flicker), else one per sensor."""
 
     name: ClassVar[str] = 'intensity_dependent_noise'
     stage: ClassVar[str] = 'light'
@@ -116,24 +118,33 @@ class IntensityDependentNoise(_OnSensors):
     strength: float = 0.03
     exponent: float = 1.0
     scale: float = DARK
+    constant: float = 0.0
+    direction: str = 'dark'
+    shared: bool = True
+
+    def amplitude(self, level: np.ndarray) -> np.ndarray:
+        r = np.clip(level, 0.0, self.scale)
+        u = r if self.direction == 'dark' else self.scale - r
+        with np.errstate(divide='ignore', invalid='ignore'):
+            law = np.where(u > 0, u * (u / self.scale) ** self.exponent, 0.0)
+        return self.constant + self.strength * np.nan_to_num(law, posinf=0.0)
 
     def process(self, robots: int, channels: int, rng):
         rows = _rows(self.sensors, channels)
 
         def apply(level):
             out = level.copy()
-            r = np.clip(level[rows], 0.0, None)
-            out[rows] += rng.standard_normal(robots) * self.strength * r \
-                * (r / self.scale) ** self.exponent
+            z = rng.standard_normal(robots if self.shared else (len(rows), robots))
+            out[rows] += z * self.amplitude(level[rows])
             return out
         return apply
 
     def over_time(self, level: np.ndarray, rng) -> np.ndarray:
         rows = _rows(self.sensors, level.shape[1])
         out = level.copy()
-        r = np.clip(level[:, rows], 0.0, None)
-        z = rng.standard_normal((level.shape[0], 1, level.shape[2]))
-        out[:, rows] += z * self.strength * r * (r / self.scale) ** self.exponent
+        width = 1 if self.shared else len(rows)
+        z = rng.standard_normal((level.shape[0], width, level.shape[2]))
+        out[:, rows] += z * self.amplitude(level[:, rows])
         return out
 
 
@@ -387,6 +398,11 @@ def _check(effect) -> None:
                 effect.levels, effect.spread, effect.mixing, effect.slow_sd,
                 effect.slow_mixing)):
             raise ValueError('empirical_noise: values must be finite')
+    if effect.name == 'intensity_dependent_noise' and (
+            effect.direction not in ('dark', 'bright') or effect.constant < 0 or
+            effect.scale <= 0 or effect.exponent < -1):
+        raise ValueError(f"intensity_dependent_noise needs direction 'dark' or 'bright', "
+                         f"constant >= 0, scale > 0, exponent >= -1, got {parameters(effect)}")
     if effect.name == 'temporal_drift' and effect.time_constant <= 0:
         raise ValueError(f'temporal_drift time_constant must be > 0, got '
                          f'{effect.time_constant}')

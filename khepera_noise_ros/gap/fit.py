@@ -18,6 +18,7 @@ Fingerprints (what the statistics of ``gap.statistics`` show):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -27,6 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
+from . import spreadlaw
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -228,31 +230,38 @@ def _refine(target: Target, make, start: float, kinds=('stationary',), evaluatio
 # --- intensity_dependent_noise ---------------------------------------------------------
 
 def intensity(target: Target, c: Comparison) -> Candidate:
+    """Extra spread that follows a law of the level (``gap.spreadlaw``): on the sensors
+    whose fast noise is more correlated than simulated (one shared draw), else on those
+    with extra spread (a draw per sensor)."""
     name = fx.IntensityDependentNoise.name
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c)
     clusters = cluster(evidence)
     if clusters:
         best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
-        sensors = tuple(channels[i] for i in best)
+        sensors, shared = tuple(channels[i] for i in best), True
     else:
         sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
                                 if z > Z_DETECT}))
+        shared = False
     if not sensors:
         return Candidate(name, None, 'no extra spread or shared noise to explain')
     cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
              for s in [_level(c, k)] if s is not None]
-    best_fit = None
-    for exponent in (0.0, 1.0, 2.0, 3.0):
-        strength = _flicker_strength(cells, exponent)
-        effect = fx.IntensityDependentNoise(sensors, strength, exponent)
-        d = target.objective([effect])
-        if best_fit is None or d < best_fit[0]:
-            best_fit = (d, exponent, strength)
-    _, exponent, strength = best_fit
-    effect = _refine(target, lambda s: fx.IntensityDependentNoise(sensors, s, exponent),
-                     strength, evaluations=5)
-    return Candidate(name, effect, f'extra spread on {_names(sensors)} growing with the level')
+    options = [fx.IntensityDependentNoise(sensors, round(k, 6), e, ANCHOR, round(c0, 4), d,
+                                          shared)
+               for d, e, c0, k, _ in spreadlaw.laws(cells)]
+    options = [o for o in options if o.strength > 0 or o.constant > 0]
+    if not options:
+        return Candidate(name, None, 'extra spread fits no spread law')
+    best_effect = min(options, key=lambda e: target.objective([e]))
+    if best_effect.strength > 0:
+        best_effect = _refine(target, lambda s: dataclasses.replace(best_effect, strength=s),
+                              best_effect.strength, evaluations=5)
+    law = spreadlaw.describe(best_effect.direction, best_effect.exponent,
+                             best_effect.constant, best_effect.strength)
+    kind = 'one shared draw' if shared else 'a draw per sensor'
+    return Candidate(name, best_effect, f'extra spread on {_names(sensors)}: {law}, {kind}')
 
 
 def _level(c: Comparison, key) -> float | None:
@@ -260,13 +269,6 @@ def _level(c: Comparison, key) -> float | None:
         if k.sensors == key.sensors and k.condition == key.condition and k.part == key.part:
             return s
     return None
-
-
-def _flicker_strength(cells, exponent: float) -> float:
-    """Moment estimate: excess variance = (strength * L * (L / 525) ** exponent) ** 2."""
-    num = sum(max(v, 0.0) for L, v in cells)
-    den = sum((L * (L / ANCHOR) ** exponent) ** 2 for L, v in cells)
-    return float(np.sqrt(num / den)) if den > 0 and num > 0 else 0.01
 
 
 # --- temporal_drift --------------------------------------------------------------------
