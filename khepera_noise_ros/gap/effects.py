@@ -216,7 +216,9 @@ class SensorLatency(_OnSensors):
 
 @dataclass(frozen=True)
 class SaturationQuantization(_OnSensors):
-    """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high]."""
+    """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high];
+    with probability ``dropout`` a reading is lost and reads ``dropout_value`` instead
+    (isolated readings stuck at zero or at a limit)."""
 
     name: ClassVar[str] = 'saturation_quantization'
     stage: ClassVar[str] = 'reading'
@@ -224,22 +226,28 @@ class SaturationQuantization(_OnSensors):
     low: float = 0.0
     high: float = DARK
     step: float = 1.0
+    dropout: float = 0.0
+    dropout_value: float = 0.0
+
+    def _convert(self, x: np.ndarray, rng) -> np.ndarray:
+        out = np.clip(np.round(x / self.step) * self.step, self.low, self.high)
+        if self.dropout > 0:
+            out = np.where(rng.random(out.shape) < self.dropout, self.dropout_value, out)
+        return out
 
     def process(self, robots: int, channels: int, rng):
         rows = _rows(self.sensors, channels)
 
         def apply(level):
             out = level.copy()
-            out[rows] = np.clip(np.round(level[rows] / self.step) * self.step, self.low,
-                                self.high)
+            out[rows] = self._convert(level[rows], rng)
             return out
         return apply
 
     def over_time(self, level: np.ndarray, rng) -> np.ndarray:
         rows = _rows(self.sensors, level.shape[1])
         out = level.copy()
-        out[:, rows] = np.clip(np.round(level[:, rows] / self.step) * self.step, self.low,
-                               self.high)
+        out[:, rows] = self._convert(level[:, rows], rng)
         return out
 
 
@@ -382,8 +390,10 @@ def _check(effect) -> None:
     if effect.name == 'sensor_latency' and effect.steps < 0:
         raise ValueError(f'sensor_latency steps must be >= 0, got {effect.steps}')
     if effect.name == 'saturation_quantization' and (effect.step <= 0 or
-                                                     effect.low >= effect.high):
-        raise ValueError(f'saturation_quantization needs step > 0 and low < high, got '
+                                                     effect.low >= effect.high or
+                                                     not 0 <= effect.dropout < 1):
+        raise ValueError(f'saturation_quantization needs step > 0, low < high and '
+                         f'0 <= dropout < 1, got '
                          f'{parameters(effect)}')
     if effect.name == 'empirical_noise':
         n = len(effect.sensors)

@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import spreadlaw
+from . import limits, spreadlaw
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -118,25 +118,36 @@ def saturation(target: Target, c: Comparison) -> Candidate:
         step = _grid(x[(x > x.min()) & (x < x.max())])
         if step > 1 and sensor in grid_flag:
             grid[sensor] = step
-    if not (low or high or grid):
-        return Candidate(name, None, 'no readings held at a limit and no coarse value grid')
+    stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    lost = limits.dropouts(stationary, target.simulate(kinds=('stationary',)),
+                           reading_range(rec.manifest, rec.channels))
+    if not (low or high or grid or lost):
+        return Candidate(name, None, 'no readings held at a limit, no coarse value grid and '
+                                     'no dropouts')
+    drop = {}
+    if lost:
+        values = [v for v, _ in lost.values()]
+        drop = {'dropout': round(float(np.median([r for _, r in lost.values()])), 5),
+                'dropout_value': max(set(values), key=values.count)}
     steps = list(grid.values())
     step = float(max(set(steps), key=steps.count)) if steps else 1.0
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
             sensors = set(grid) | (set(low) if use_low else set()) | \
-                (set(high) if use_high else set())
+                (set(high) if use_high else set()) | set(lost)
             if sensors:
                 options.append(fx.SaturationQuantization(
                     tuple(sorted(sensors)),
                     low=float(np.median(list(low.values()))) if use_low else 0.0,
                     high=float(np.median(list(high.values()))) if use_high else ANCHOR,
-                    step=step))
+                    step=step, **drop))
     effect = min(options, key=lambda e: target.objective([e], ('stationary',)))
     what = [w for w, found in (('clipped below', effect.low > 0),
                                ('clipped above', effect.high < ANCHOR),
-                               ('on a grid', effect.step > 1)) if found]
+                               ('on a grid', effect.step > 1),
+                               (f'dropping out to {effect.dropout_value:g} at rate '
+                                f'{effect.dropout:.2%}', effect.dropout > 0)) if found]
     return Candidate(name, effect, f'{_names(effect.sensors)} {" and ".join(what)}')
 
 
