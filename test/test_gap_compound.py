@@ -110,3 +110,17 @@ def test_a_spread_law_growing_with_brightness_is_fitted_with_its_parameters():
     assert p['direction'] == 'bright' and not p['shared']
     assert abs(p['exponent'] - 1.0) <= 0.5 and p['constant'] < 4.0
     assert result.effects[0]['heldout_reduction'] > 0.8
+
+
+def test_latency_and_an_offset_lattice_are_found_together():
+    """Readings on the lattice 3 + 7k on every sensor, and four sensors a sample late."""
+    hidden = [fx.SaturationQuantization(tuple(range(8)), step=7.0, origin=3.0),
+              fx.SensorLatency((0, 1, 2, 3), 1)]
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=30), hidden, seed=5)],
+                               OPTIONS)
+    chosen = {c['name']: c for c in result.to_json()['compound']['chosen']}
+    assert set(chosen) == {'sensor_latency', 'saturation_quantization'}
+    assert chosen['saturation_quantization']['parameters']['step'] == 7.0
+    assert chosen['saturation_quantization']['parameters']['origin'] == 3.0
+    assert chosen['sensor_latency']['sensors'] == [0, 1, 2, 3]
+    assert result.compound.reduction > 0.9

@@ -216,7 +216,8 @@ class SensorLatency(_OnSensors):
 
 @dataclass(frozen=True)
 class SaturationQuantization(_OnSensors):
-    """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high];
+    """The converter: ``sensors`` rounded to the lattice origin + k * ``step``, then held in
+    [low, high];
     with probability ``dropout`` a reading is lost and reads ``dropout_value`` instead
     (isolated readings stuck at zero or at a limit)."""
 
@@ -228,9 +229,11 @@ class SaturationQuantization(_OnSensors):
     step: float = 1.0
     dropout: float = 0.0
     dropout_value: float = 0.0
+    origin: float = 0.0           # the lattice is origin + k * step
 
     def _convert(self, x: np.ndarray, rng) -> np.ndarray:
-        out = np.clip(np.round(x / self.step) * self.step, self.low, self.high)
+        lattice = np.round((x - self.origin) / self.step) * self.step + self.origin
+        out = np.clip(lattice, self.low, self.high)
         if self.dropout > 0:
             out = np.where(rng.random(out.shape) < self.dropout, self.dropout_value, out)
         return out

@@ -115,9 +115,9 @@ def saturation(target: Target, c: Comparison) -> Candidate:
             low[sensor] = ends[0]
         if ends[1] is not None:
             high[sensor] = ends[1]
-        step = _grid(x[(x > x.min()) & (x < x.max())])
-        if step > 1 and sensor in grid_flag:
-            grid[sensor] = step
+        lattice = _grid(x[(x > x.min()) & (x < x.max())])
+        if lattice[0] > 1 and sensor in grid_flag:
+            grid[sensor] = lattice
     stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
     lost = limits.dropouts(stationary, target.simulate(kinds=('stationary',)),
                            reading_range(rec.manifest, rec.channels))
@@ -129,8 +129,8 @@ def saturation(target: Target, c: Comparison) -> Candidate:
         values = [v for v, _ in lost.values()]
         drop = {'dropout': round(float(np.median([r for _, r in lost.values()])), 5),
                 'dropout_value': max(set(values), key=values.count)}
-    steps = list(grid.values())
-    step = float(max(set(steps), key=steps.count)) if steps else 1.0
+    lattices = list(grid.values())
+    step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
@@ -141,7 +141,7 @@ def saturation(target: Target, c: Comparison) -> Candidate:
                     tuple(sorted(sensors)),
                     low=float(np.median(list(low.values()))) if use_low else 0.0,
                     high=float(np.median(list(high.values()))) if use_high else ANCHOR,
-                    step=step, **drop))
+                    step=float(step), origin=float(origin), **drop))
     effect = min(options, key=lambda e: target.objective([e], ('stationary',)))
     what = [w for w, found in (('clipped below', effect.low > 0),
                                ('clipped above', effect.high < ANCHOR),
@@ -168,14 +168,16 @@ def _clipped_ends(real: np.ndarray, sim: np.ndarray, limits) -> tuple:
     return tuple(out)
 
 
-def _grid(x: np.ndarray) -> int:
-    """The coarsest step (2..32) on which nearly all integer readings ``x`` lie, else 1."""
+def _grid(x: np.ndarray) -> tuple[int, int]:
+    """(step, origin): the coarsest lattice origin + k * step (step 2..32) on which nearly
+    all integer readings ``x`` lie, else (1, 0)."""
     if x.size < 20 or not np.all(x == np.round(x)):
-        return 1
+        return 1, 0
     for q in range(32, 1, -1):
-        if np.bincount(np.mod(x, q).astype(np.int64)).max() >= 0.95 * x.size:
-            return q
-    return 1
+        counts = np.bincount(np.mod(x, q).astype(np.int64))
+        if counts.max() >= 0.95 * x.size:
+            return q, int(counts.argmax())
+    return 1, 0
 
 
 # --- correlated_noise ------------------------------------------------------------------
