@@ -118,10 +118,31 @@ def _stationary(rec, config, effects, seed, replicates, mode) -> Recording:
         noise = _noise_within(config.noise, rec.channels)
     light = np.tile(_hold(light) / scale, (1, 1, replicates))     # copies side by side
     sim = stationary(light, noise, effects, seed=seed) * scale
-    everything = np.arange(len(rec))
-    out = [_rows(rec, everything, sim[rec.step, :, column + k * episodes.size], k)
-           for k in range(replicates)]
-    return _concat(out, rec, config)
+    readings = np.concatenate([sim[rec.step, :, column + k * episodes.size]
+                               for k in range(replicates)])
+    return _indexed(rec, replicates, readings)
+
+
+_INDEX: dict = {}
+
+
+def _indexed(rec: Recording, replicates: int, readings: np.ndarray) -> Recording:
+    """A replay of stationary ``rec``: its index columns (episode, step, heading,
+    condition) are built once per recording and number of copies and shared by every
+    replay, so statistics can reuse their layout (``statistics._layout``)."""
+    key = (id(rec), replicates)
+    hit = _INDEX.get(key)
+    if hit is None or hit[0] is not rec:
+        everything = np.arange(len(rec))
+        parts = [_rows(rec, everything, None, k) for k in range(replicates)]
+        cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != 'readings'}
+        manifest = {k: v for k, v in rec.manifest.items() if k not in ('source', 'samples',
+                                                                       'lost_steps')}
+        manifest['source'] = 'simulator'
+        if len(_INDEX) > 64:
+            _INDEX.clear()
+        hit = _INDEX[key] = (rec, cols, manifest)
+    return Recording(**hit[1], readings=readings, manifest=dict(hit[2]))
 
 
 def _hold(light: np.ndarray) -> np.ndarray:
