@@ -26,7 +26,7 @@ from .target import Target
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
-JOINT = 2                 # candidates per step fitted jointly with the chosen ones
+JOINT = 1                 # candidates per step refitted jointly with the chosen ones
 
 
 @dataclass
@@ -99,7 +99,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             trials.append((after.discrepancy, cand, after))
         if not trials:
             break
-        # the few best, fitted jointly: the chosen effects refitted given the candidate
+        # the best, fitted jointly: the chosen effects refitted given the candidate
         # (a proxy chosen earlier, e.g. one group for a shared flicker, can then give way)
         joint = []
         for d, cand, after in sorted(trials, key=lambda t: t[0])[:JOINT]:

@@ -102,21 +102,8 @@ def _stationary(rec, config, effects, seed, replicates, mode) -> Recording:
     """Each episode is simulated as one continuous run through its headings and conditions,
     so effects with memory (drift, latency) carry over from one heading to the next."""
     episodes, column = np.unique(rec.episode, return_inverse=True)
-    length = int(rec.step.max()) + 1
-    light = np.full((length, rec.channels, episodes.size), np.nan)
-    if mode == 'model':
-        tables = {label: light_table(condition_world(rec, label, config.world))
-                  for label in rec.conditions()}
-        for label, table in tables.items():
-            at = rec.condition == label
-            light[rec.step[at], :, column[at]] = table[:, to_tenths(rec.heading_deg[at])].T
-        noise, scale = config.noise, 1.0
-    else:
-        for r in runs(rec):
-            light[rec.step[r], :, column[r[0]]] = np.nan_to_num(rec.readings[r].mean(axis=0))
-        scale = max(1.0, float(np.nanmax(light)) / DARK)    # the model's noise is proportional
-        noise = _noise_within(config.noise, rec.channels)
-    light = np.tile(_hold(light) / scale, (1, 1, replicates))     # copies side by side
+    light, noise, scale = _light(rec, config, mode)
+    light = np.tile(light, (1, 1, replicates))     # copies side by side
     sim = stationary(light, noise, effects, seed=seed) * scale
     readings = np.concatenate([sim[rec.step, :, column + k * episodes.size]
                                for k in range(replicates)])
@@ -143,6 +130,39 @@ def _indexed(rec: Recording, replicates: int, readings: np.ndarray) -> Recording
             _INDEX.clear()
         hit = _INDEX[key] = (rec, cols, manifest)
     return Recording(**hit[1], readings=readings, manifest=dict(hit[2]))
+
+
+_LIGHT: dict = {}
+
+
+def _light(rec: Recording, config: SimConfig, mode: str) -> tuple:
+    """(samples, channels, episodes) light of every step of ``rec``'s episodes, the noise
+    model to use and the scale of the readings; computed once per recording and
+    configuration (every replay of a protocol sees the same light)."""
+    key = (id(rec), config.world, config.noise, mode)
+    hit = _LIGHT.get(key)
+    if hit is not None and hit[0] is rec:
+        return hit[1]
+    episodes, column = np.unique(rec.episode, return_inverse=True)
+    length = int(rec.step.max()) + 1
+    light = np.full((length, rec.channels, episodes.size), np.nan)
+    if mode == 'model':
+        tables = {label: light_table(condition_world(rec, label, config.world))
+                  for label in rec.conditions()}
+        for label, table in tables.items():
+            at = rec.condition == label
+            light[rec.step[at], :, column[at]] = table[:, to_tenths(rec.heading_deg[at])].T
+        noise, scale = config.noise, 1.0
+    else:
+        for r in runs(rec):
+            light[rec.step[r], :, column[r[0]]] = np.nan_to_num(rec.readings[r].mean(axis=0))
+        scale = max(1.0, float(np.nanmax(light)) / DARK)    # the model's noise is proportional
+        noise = _noise_within(config.noise, rec.channels)
+    out = (_hold(light) / scale, noise, scale)
+    if len(_LIGHT) > 64:
+        _LIGHT.clear()
+    _LIGHT[key] = (rec, out)
+    return out
 
 
 def _hold(light: np.ndarray) -> np.ndarray:

@@ -89,7 +89,8 @@ class Target:
         if self.kinds[i] != 'stationary' or self.copies < 2:
             return factor
         span = int(self.recordings[i].episode.max()) + 1
-        labels, cell = statistics.cells(sim)
+        lay = statistics._layout(sim, self.block_lengths[i])
+        labels, cell = lay['labels'], lay['cell']
         copy = sim.episode // span
         used = list(self.recordings[i].channels_used)
         code = cell * self.copies + copy
