@@ -6,7 +6,8 @@ already chosen (the simulator the candidate is fitted against already has
 them, ``Target.with_given``), scores simulator + chosen + candidate on the
 held-out part, and keeps the best candidate only if it lowers the held-out
 discrepancy significantly: by at least ``MIN_ADDED`` of the discrepancy before
-any effect, and in ``1 - alpha`` of the paired bootstrap replicates (the same
+any effect (or ``MIN_LOCAL`` of one protocol's own: a turn error acts only on the
+closed-loop statistics), and in ``1 - alpha`` of the paired bootstrap replicates (the same
 resampled real data against both simulators).  After each addition the
 effects chosen earlier are refitted given the others (one backfitting pass),
 kept only where that lowers the *fitting* part's discrepancy, so the held-out
@@ -24,6 +25,7 @@ from . import fit
 from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
+MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
@@ -73,10 +75,12 @@ def paired_p(before: np.ndarray, after: np.ndarray, d_prev: float, d_new: float)
 
 
 def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.ndarray,
-           log=None) -> Compound:
+           before=None, log=None) -> Compound:
     """Forward selection from ``first`` (the best single effect: its fitted effect, note,
-    held-out comparison and replicate discrepancies) over the candidate ``names``."""
+    held-out comparison and replicate discrepancies) over the candidate ``names``;
+    ``before`` is the held-out comparison without effects."""
     effect0, note0, cmp0, reps0 = first
+    first_cmp = before if before is not None else b.compare()
     d_prev = cmp0.discrepancy
     steps = [entry(effect0, note0, d_before, d_prev, d_before,
                    paired_p(before_reps, reps0, d_before, d_prev))]
@@ -110,7 +114,8 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         reps = b.replicate_discrepancies(after)
         p = paired_p(current_reps, reps, d_prev, d_new)
         added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
-        if added < MIN_ADDED or p >= STEP_ALPHA:
+        local = _local_gain(first_cmp, current_cmp, after)
+        if (added < MIN_ADDED and local < MIN_LOCAL) or p >= STEP_ALPHA or d_new >= d_prev:
             rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
                          'note': cand.note}]
             break
@@ -128,6 +133,27 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         s['sensors'] = list(e.sensors)
     return Compound(chosen, steps, d_before, current_cmp.discrepancy, current_cmp,
                     current_reps, rejected)
+
+
+def _local_gain(before, current, after) -> float:
+    """The largest share of one protocol's own held-out discrepancy (stationary or
+    closed-loop statistics) a step removes.  A turn error acts only on closed-loop
+    statistics, whose discrepancy can be small beside the stationary one's."""
+    best = 0.0
+    for closed in (False, True):
+        d0, d1, d2 = (_part(c, closed) for c in (before, current, after))
+        if d0 > 0:
+            best = max(best, (d1 - d2) / d0)
+    return best
+
+
+def _part(c, closed: bool) -> float:
+    keep = np.array([(k.family not in STATIONARY) == closed for k in c.keys], bool)
+    return c.select(keep).discrepancy if keep.any() else 0.0
+
+
+STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
+              'spread_vs_level', 'step_response', 'mode_share', 'granularity'}
 
 
 def _backfit(a: Target, chosen: list) -> list:

@@ -175,7 +175,7 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
             if o.compound:
                 result.compound = compound.select(
                     a, b, (best_effect, best['note'], best_cmp, scored[0][3]), o.effects,
-                    d_before, before_reps)
+                    d_before, before_reps, result.held_out_before)
                 result.held_out_after = result.compound.comparison
                 result.combined = {'effects': [e.name for e in result.compound.effects],
                                    'discrepancy_before': d_before,

@@ -1,7 +1,8 @@
 """Dropouts: isolated readings stuck at zero or at a limit of the reading range.
 
 A reading equal to an end of the range (0 or the scale's top) in a run whose
-median lies well away from it (by ``AWAY`` readings) is a dropout: the sensor
+median lies well away from it (by ``AWAY`` readings and ``SPREADS`` robust sds) is a
+dropout: the sensor
 lost one sample, it did not see that light.  A sensor has dropouts when its real
 count exceeds the simulator's expected count by ``Z`` Poisson standard errors.
 """
@@ -12,16 +13,22 @@ import numpy as np
 from . import replay
 
 AWAY = 10.0
+SPREADS = 6.0
 Z = 4.0
 
 
 def _counts(recs, sensors, value: float) -> tuple[np.ndarray, np.ndarray]:
+    """Readings at ``value`` in runs whose bulk lies far from it: by ``AWAY`` readings and
+    by ``SPREADS`` robust sds (a noisy run near the end of the range clips there; that
+    is a limit, not a dropout)."""
     hits = np.zeros(len(sensors))
     total = np.zeros(len(sensors))
     for rec in recs:
         for r in replay.runs(rec):
             x = rec.readings[r][:, sensors]
-            far = np.abs(np.median(x, axis=0) - value) >= AWAY
+            median = np.median(x, axis=0)
+            sd = 1.4826 * np.median(np.abs(x - median), axis=0)
+            far = np.abs(median - value) >= np.maximum(AWAY, SPREADS * sd)
             hits += np.where(far, (x == value).sum(axis=0), 0)
             total += np.where(far, x.shape[0], 0)
     return hits, total

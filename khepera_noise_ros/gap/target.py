@@ -22,6 +22,7 @@ from .statistics import Stats
 from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, standard_error
 
 SIM_COPIES = 3
+SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
 SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of copies
 
 
@@ -128,8 +129,9 @@ class Target:
         return out
 
     def compare(self, effects=(), replicates: int | None = None) -> Comparison:
-        """Real against simulated-with-``effects``, bootstrap variance on both sides."""
-        replicates = self.replicates if replicates is None else replicates
+        """Real against simulated-with-``effects``, bootstrap variance on both sides (the
+        simulated side, 2-3 copies, is the more precise: ``SIM_REPLICATES`` suffice)."""
+        replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
         sim, factor = self._simulated(effects, replicates, None)
         return compare(self.real, sim, factor)
 
