@@ -194,20 +194,23 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     for r in runs:                     # residuals about each run's own mean: the same
         y[r] -= x[r].mean(axis=0)      # small bias for real and simulated runs alike
     yo, xo = y[order], x[order]
+    # products in single precision (sums over a block of at most a few hundred samples
+    # keep 6 digits), levels and first moments in double
+    y32 = yo.astype(np.float32)
     upper = np.triu_indices(len(channels))
     s2 = np.zeros((nb, len(channels), len(channels)))
-    s2[:, upper[0], upper[1]] = _block_sum(block, yo[:, upper[0]] * yo[:, upper[1]], nb)
+    s2[:, upper[0], upper[1]] = _block_sum(block, y32[:, upper[0]] * y32[:, upper[1]], nb)
     s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
     parts = {'n': np.bincount(block, minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
              's1': _block_sum(block, yo, nb),
              's2': s2,
-             's4': _block_sum(block, yo ** 4, nb)}
-    parts['lag_n'], parts['lag_s'] = _lagged(lay['lags'], yo, block, nb)
+             's4': _block_sum(block, np.square(np.square(y32)), nb)}
+    parts['lag_n'], parts['lag_s'] = _lagged(lay['lags'], y32, block, nb)
     integer = bool(np.all(x == np.round(x)))
     modes = _cell_modes(x, cell, len(labels)) if integer else np.full((len(labels), x.shape[1]),
                                                                       np.nan)
-    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float64), nb)
+    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float32), nb)
     residue = _residue_hits(xo, _modal_residues(x)) if integer \
         else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
@@ -242,7 +245,8 @@ def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of
 
 
 def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray:
-    """Sums of ``values`` per block; ``block`` must be non-decreasing."""
+    """Sums of ``values`` per block (in their own precision), as doubles; ``block`` must be
+    non-decreasing."""
     out = np.zeros((blocks,) + values.shape[1:])
     if block.size:
         starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
@@ -308,7 +312,7 @@ def _modal_residues(x: np.ndarray, residues: np.ndarray | None = None) -> np.nda
 
 def _residue_hits(x: np.ndarray, modal: np.ndarray) -> np.ndarray:
     """(N, C, len(MODULI)) 1 where a reading falls in its channel's modal residue class."""
-    return (_residues(x) == modal[None]).astype(np.float64)
+    return (_residues(x) == modal[None]).astype(np.float32)
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
