@@ -83,6 +83,12 @@ class Diagnosis:
         return [] if self.fitted is None else [self.fitted]
 
     def to_json(self) -> dict:
+        """diagnosis.json: the fixed keys of format 1 plus this project's additions.
+
+        Returns:
+            A dict of plain JSON values (``format``, ``where``, ``effects``,
+            ``top_effect``, ``transfer``, ``compound``, ``remainder``, ``allan``, ...).
+        """
         transfer = self.transfer or {'fitness_gap_before': None, 'fitness_gap_after': None,
                                      'trials': 0}
         return {'format': FORMAT, 'where': self.where, 'effects': self.effects,
@@ -96,7 +102,16 @@ class Diagnosis:
 
 
 def check(recordings: list[Recording]) -> None:
-    """Refuse input the diagnosis cannot make sense of, saying what is wrong."""
+    """Refuse input the diagnosis cannot make sense of, saying what is wrong.
+
+    Args:
+        recordings: the real recordings to be diagnosed together (one robot).
+
+    Raises:
+        ValueError: a one-line message naming the recording and what is wrong (none
+            given, too few samples, different channel layouts, no variation, a
+            closed-loop recording without its genome).
+    """
     if not recordings:
         raise ValueError('the diagnosis needs at least one recording')
     for i, rec in enumerate(recordings):
@@ -133,7 +148,25 @@ def _name(rec: Recording, i: int) -> str:
 
 def diagnose(recordings: list[Recording], options: Options = Options(), reality=None,
              transfer_trials: int = 0, transfer_ea=None) -> Diagnosis:
-    """Diagnose the gap between ``recordings`` and the simulator of ``options.config``."""
+    """Diagnose the gap between ``recordings`` and the simulator of ``options.config``.
+
+    Args:
+        recordings: real recordings of one robot (stationary, closed-loop or both).
+        options: the simulator's configuration, seed, hold-out, thresholds, candidates.
+        reality: ``(genomes, seeds) -> fitness`` on the real robot, for the transfer
+            experiment; None to skip it.
+        transfer_trials: trials per arm of the transfer experiment (0: not run).
+        transfer_ea: the evolutionary algorithm's settings for it.
+
+    Returns:
+        The ``Diagnosis``: where the gap lies, every candidate effect alone (ranked),
+        the top effect, the compound set chosen by forward selection, the remainder
+        with its empirical model, the Allan profiles and notes.  ``to_json()`` gives
+        diagnosis.json.
+
+    Raises:
+        ValueError: bad recordings or options (see ``check``), with a one-line message.
+    """
     check(recordings)
     o = options
     notes = _base_notes(recordings, o.base)
