@@ -69,3 +69,21 @@ def test_a_drift_with_time_constant_zero_is_refused_not_run():
     import pytest
     with pytest.raises(ValueError, match='time_constant'):
         fit.runnable(fx.TemporalDrift((0,), 0.01, 0.0, True))
+
+
+def test_affine_spread_on_every_sensor_is_diagnosed_without_a_traceback(tmp_path):
+    """The recording that once ended in ZeroDivisionError (a drift fitted with time
+    constant 0): every sensor's spread affine in its level.  The whole diagnosis runs,
+    and what it writes loads back as simulator parameters."""
+    from khepera_noise_ros.gap import report, simconfig
+    from khepera_noise_ros.gap.simulate import EffectEpisodes
+    rec = stationary_protocol(samples=20, repeats=2)
+    rec.readings = _readings(rec, 'affine', 2.0, 7)
+    rec.manifest = dict(rec.manifest, source='emulator')
+    result = diagnose.diagnose([rec], diagnose.Options(config=CONFIG, replicates=30))
+    paths = report.write(result, tmp_path, CONFIG, figures=False)
+    for key in ('params', 'params_with_remainder'):
+        if key in paths:
+            loaded = simconfig.load(paths[key])
+            assert len(loaded.effects) >= 1
+            EffectEpisodes(effects=loaded.effects).reset(np.arange(2))
