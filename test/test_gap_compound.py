@@ -166,3 +166,23 @@ def test_the_emulated_robots_default_effects_are_found_as_a_set(emulated):
     config, result = emulated
     names = {c['name'] for c in result.to_json()['compound']['chosen']}
     assert names == set(config.enabled), names
+
+
+def test_a_turn_error_shows_in_recorded_headings_too():
+    """A closed-loop recording that keeps its headings (a tracked robot): the turn size
+    itself is a fingerprint, even where the readings' response to turns looks as
+    simulated (their z are zeroed here), and the scale is taken from it."""
+    import dataclasses as dc
+    from khepera_noise_ros.gap import fit
+    from test_gap_support import closed_loop_protocol
+    rec = replay.replay(closed_loop_protocol(16), CONFIG, [fx.ActuatorTurnError(1.35, 0.0)],
+                        seed=6)
+    rec.manifest = dict(rec.manifest, source='hardware')
+    target = Target([rec], CONFIG, 1, replicates=40)
+    c = target.compare()
+    quiet = np.array([0.0 if k.family in ('turn_response', 'sensor_turn_response') else z
+                      for k, z in zip(c.keys, c.z)])
+    assert any(k.family == 'turn_size' and abs(z) > 4 for k, z in zip(c.keys, c.z))
+    cand = fit.actuator(target, dc.replace(c, z=quiet))
+    assert cand.effect is not None, cand.note
+    assert abs(cand.effect.scale - 1.35) < 0.15

@@ -396,10 +396,13 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     rows = [(r, s) for k, r, s, se, z in _rows(c, 'turn_response') if k.part == 'lag 0']
     if not rows:
         return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
-    if not any(abs(z) > Z_DETECT for family in ('turn_response', 'sensor_turn_response')
+    if not any(abs(z) > Z_DETECT for family in ('turn_response', 'sensor_turn_response',
+                                                 'turn_size')
                for *_, z in _rows(c, family)):
         return Candidate(name, None, 'the readings respond to turns as simulated')
-    real, sim = np.mean(rows, axis=0)
+    # recorded headings measure the turn itself; else the readings' response to it
+    size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
+    real, sim = np.mean(size if size else rows, axis=0)
     scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
 
     def objective(scale, slip):
