@@ -87,3 +87,14 @@ def test_affine_spread_on_every_sensor_is_diagnosed_without_a_traceback(tmp_path
             loaded = simconfig.load(paths[key])
             assert len(loaded.effects) >= 1
             EffectEpisodes(effects=loaded.effects).reset(np.arange(2))
+
+
+def test_limits_in_a_closed_loop_recording_alone_are_judged_on_it():
+    """A floor in closed-loop data with no stationary recording: the saturation fit must
+    judge its options on the closed-loop statistics (it once indexed an empty list)."""
+    from test_gap_support import closed_loop_protocol, recorded
+    floor = fx.SaturationQuantization((2, 3), low=120.0)
+    rec = recorded(closed_loop_protocol(12), [floor], seed=4)
+    target = Target([rec], CONFIG, 1, replicates=20)
+    cand = fit.fit_one('saturation_quantization', target, target.compare())
+    assert 'failed' not in cand.note, cand.note

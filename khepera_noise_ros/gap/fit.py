@@ -142,7 +142,8 @@ def saturation(target: Target, c: Comparison) -> Candidate:
                     low=float(np.median(list(low.values()))) if use_low else 0.0,
                     high=float(np.median(list(high.values()))) if use_high else ANCHOR,
                     step=float(step), origin=float(origin), **drop))
-    effect = min(options, key=lambda e: target.objective([e], ('stationary',)))
+    kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
+    effect = min(options, key=lambda e: target.objective([e], kinds))
     what = [w for w, found in (('clipped below', effect.low > 0),
                                ('clipped above', effect.high < ANCHOR),
                                ('on a grid', effect.step > 1),
@@ -234,6 +235,7 @@ def _by_condition(c: Comparison, family: str) -> dict:
 def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
     """The effect ``make(x)`` with x refined on a log scale around ``start``."""
     start = float(np.clip(start, 1e-5, 10.0)) if np.isfinite(start) else 0.01
+    kinds = _present(target, kinds)
     lo, hi = math.log(start / 3), math.log(start * 3)
     best = _golden(lambda u: target.objective([make(math.exp(u))], kinds), lo, hi,
                    evaluations)
@@ -385,7 +387,13 @@ def latency(target: Target, c: Comparison) -> Candidate:
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 
 
+def _present(target: Target, kinds):
+    """``kinds`` if the target has recordings of them, else all of its recordings."""
+    return kinds if kinds is None or set(kinds) & set(target.kinds) else None
+
+
 def _best_delay(target: Target, sensors, delays, kinds=('stationary',)) -> int:
+    kinds = _present(target, kinds)
     return min(delays, key=lambda d: target.objective([fx.SensorLatency(sensors, d)], kinds))
 
 
@@ -396,9 +404,8 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     rows = [(r, s) for k, r, s, se, z in _rows(c, 'turn_response') if k.part == 'lag 0']
     if not rows:
         return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
-    if not any(abs(z) > Z_DETECT for family in ('turn_response', 'sensor_turn_response',
-                                                 'turn_size')
-               for *_, z in _rows(c, family)):
+    families = ('turn_response', 'sensor_turn_response', 'turn_size')
+    if not any(abs(z) > Z_DETECT for family in families for *_, z in _rows(c, family)):
         return Candidate(name, None, 'the readings respond to turns as simulated')
     # recorded headings measure the turn itself; else the readings' response to it
     size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
