@@ -186,3 +186,15 @@ def test_a_turn_error_shows_in_recorded_headings_too():
     cand = fit.actuator(target, dc.replace(c, z=quiet))
     assert cand.effect is not None, cand.note
     assert abs(cand.effect.scale - 1.35) < 0.15
+
+
+def test_shared_noise_of_a_fixed_size_is_correlated_noise_in_every_group():
+    """Two non-adjacent pairs share noise of 6 readings whatever the light (a supply):
+    both groups are found and the fixed size is fitted."""
+    hidden = [fx.CorrelatedNoise(((3, 5), (0, 6)), 0.0, 6.0)]
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=30), hidden, seed=5)],
+                               OPTIONS)
+    assert result.top_effect == 'correlated_noise', result.effects[:2]
+    p = result.effects[0]['parameters']
+    assert sorted(map(sorted, p['groups'])) == [[0, 6], [3, 5]]
+    assert abs(p['constant'] - 6.0) < 1.5 and p['strength'] < 0.005

@@ -150,12 +150,14 @@ class IntensityDependentNoise(_OnSensors):
 
 @dataclass(frozen=True)
 class CorrelatedNoise:
-    """Normal noise shared within each group, sd ``strength`` x the group's mean level."""
+    """Normal noise shared within each group, sd ``strength`` x the group's mean level
+    (the paper's dependent noise) plus ``constant`` (readings, whatever the level)."""
 
     name: ClassVar[str] = 'correlated_noise'
     stage: ClassVar[str] = 'light'
     groups: tuple = ()
     strength: float = 0.01
+    constant: float = 0.0
 
     def process(self, robots: int, channels: int, rng):
         groups = [_rows(g, channels) for g in self.groups]
@@ -164,7 +166,8 @@ class CorrelatedNoise:
             out = level.copy()
             z = rng.standard_normal((len(groups), robots))
             for g, members in enumerate(groups):
-                out[members] += self.strength * level[members].mean(axis=0) * z[g]
+                out[members] += (self.strength * level[members].mean(axis=0)
+                                 + self.constant) * z[g]
             return out
         return apply
 
@@ -173,7 +176,8 @@ class CorrelatedNoise:
         out = level.copy()
         z = rng.standard_normal((level.shape[0], len(groups), level.shape[2]))
         for g, members in enumerate(groups):
-            out[:, members] += (self.strength * level[:, members].mean(axis=1) * z[:, g])[:, None]
+            sd = self.strength * level[:, members].mean(axis=1) + self.constant
+            out[:, members] += (sd * z[:, g])[:, None]
         return out
 
     @property

@@ -204,6 +204,13 @@ def correlated(target: Target, c: Comparison) -> Candidate:
         return Candidate(name, None, 'no sensors whose noise is more correlated than simulated')
     start = _shared_strength(c, groups)
     effect = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), s), start)
+    # shared noise of a fixed size in readings (a supply, a converter), not a share of
+    # the level: one more form of the same effect, kept if the simulator says so
+    level = np.mean([r for k, r, *_ in _rows(c, 'level')] or [ANCHOR / 2])
+    fixed = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), 0.0, s),
+                    start * level, evaluations=5)
+    if target.objective([fixed]) < target.objective([effect]):
+        effect = fixed
     return Candidate(name, effect, f'excess correlation clusters into {_groups(groups)}')
 
 
@@ -234,7 +241,7 @@ def _by_condition(c: Comparison, family: str) -> dict:
 
 def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
     """The effect ``make(x)`` with x refined on a log scale around ``start``."""
-    start = float(np.clip(start, 1e-5, 10.0)) if np.isfinite(start) else 0.01
+    start = float(np.clip(start, 1e-5, 1e3)) if np.isfinite(start) else 0.01
     kinds = _present(target, kinds)
     lo, hi = math.log(start / 3), math.log(start * 3)
     best = _golden(lambda u: target.objective([make(math.exp(u))], kinds), lo, hi,
