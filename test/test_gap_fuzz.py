@@ -98,3 +98,13 @@ def test_limits_in_a_closed_loop_recording_alone_are_judged_on_it():
     target = Target([rec], CONFIG, 1, replicates=20)
     cand = fit.fit_one('saturation_quantization', target, target.compare())
     assert 'failed' not in cand.note, cand.note
+
+
+def test_a_lattice_in_a_closed_loop_recording_alone_is_found():
+    from test_gap_support import closed_loop_protocol, recorded
+    lattice = fx.SaturationQuantization(tuple(range(8)), step=6.0, origin=2.0)
+    rec = recorded(closed_loop_protocol(12), [lattice], seed=4)
+    target = Target([rec], CONFIG, 1, replicates=20)
+    cand = fit.fit_one('saturation_quantization', target, target.compare())
+    assert cand.effect is not None, cand.note
+    assert (cand.effect.step, cand.effect.origin) == (6.0, 2.0)

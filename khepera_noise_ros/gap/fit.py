@@ -116,7 +116,11 @@ def saturation(target: Target, c: Comparison) -> Candidate:
         if ends[1] is not None:
             high[sensor] = ends[1]
         lattice = _grid(x[(x > x.min()) & (x < x.max())])
-        if lattice[0] > 1 and sensor in grid_flag:
+        # closed-loop statistics have no granularity: there the simulator's own readings
+        # not lying on the real lattice is the evidence
+        measured = sensor in grid_flag if _rows(c, 'granularity') else \
+            _grid(y[(y > y.min()) & (y < y.max())]) != lattice
+        if lattice[0] > 1 and measured:
             grid[sensor] = lattice
     stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
     lost = limits.dropouts(stationary, target.simulate(kinds=('stationary',)),
