@@ -64,19 +64,22 @@ class Target:
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]
 
-    def _simulated(self, effects, replicates: int, kinds) -> tuple[Stats, np.ndarray]:
+    def _simulated(self, effects, replicates: int, kinds,
+                   copies: int | None = None) -> tuple[Stats, np.ndarray]:
         """Simulated statistics of all copies together, and per statistic the factor by
         which the block bootstrap understates the variance of cell levels (see
         ``_level_inflation``)."""
+        copies = self.copies if copies is None else copies
         stats, factors = [], []
-        for i, sim in zip(self._chosen(kinds), self.simulate(effects, kinds=kinds)):
+        for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
             s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config),
                                    replicates, self.seed + 101 + i)
             stats.append(s)
-            factors.append(self._level_inflation(i, sim, s))
+            factors.append(self._level_inflation(i, sim, s, copies))
         return _join(stats), np.concatenate(factors)
 
-    def _level_inflation(self, i: int, sim: Recording, pooled: Stats) -> np.ndarray:
+    def _level_inflation(self, i: int, sim: Recording, pooled: Stats,
+                         copies: int) -> np.ndarray:
         """Per statistic of ``pooled``: 1, except cell levels of stationary data.
 
         A slow wander moves whole runs, which blocks within a run cannot show.  The
@@ -87,19 +90,19 @@ class Target:
         Cell means per copy come straight from the readings (one pass, no statistics).
         """
         factor = np.ones(len(pooled.keys))
-        if self.kinds[i] != 'stationary' or self.copies < 2:
+        if self.kinds[i] != 'stationary' or copies < 2:
             return factor
         span = int(self.recordings[i].episode.max()) + 1
         lay = statistics._layout(sim, self.block_lengths[i])
         labels, cell = lay['labels'], lay['cell']
         copy = sim.episode // span
         used = list(self.recordings[i].channels_used)
-        code = cell * self.copies + copy
-        size = len(labels) * self.copies
-        count = np.bincount(code, minlength=size).reshape(len(labels), self.copies)
+        code = cell * copies + copy
+        size = len(labels) * copies
+        count = np.bincount(code, minlength=size).reshape(len(labels), copies)
         x = sim.readings[:, used]
         means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(len(used))],
-                         axis=1).reshape(len(labels), self.copies, len(used))
+                         axis=1).reshape(len(labels), copies, len(used))
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
         spread = np.var(means, axis=1, ddof=1)                    # (cells, channels)
@@ -139,16 +142,24 @@ class Target:
         """The discrepancy with ``effects`` added, from simulated estimates only, over the
         recordings of ``kinds`` and the statistics of ``families`` (all for None)."""
         real = _join([self._real[i] for i in self._chosen(kinds)])
-        sim, factor = self._simulated(effects, 0, kinds)
+        copies = self._objective_copies()
+        sim, factor = self._simulated(effects, 0, kinds, copies)
         where = sim.index()
         pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where
                  and (families is None or k.family in families)]
         ri, si = (np.array(p, np.int64) for p in zip(*pairs))
         d = real.estimate[ri] - sim.estimate[si]
-        se = standard_error(real.variance[ri] * factor[si] * (1.0 + 1.0 / self.copies),
+        se = standard_error(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies),
                             [real.keys[i] for i in ri])
         ok = np.isfinite(d) & np.isfinite(se)
         return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
+
+    def _objective_copies(self) -> int:
+        """Copies simulated while fitting: one for a long recording (its simulated
+        statistics are then as precise as the real ones, which the objective allows
+        for), else as many as for comparisons."""
+        n = sum(len(r) for r in self.recordings)
+        return 1 if n >= SIM_SAMPLES / 2 else self.copies
 
     def replicate_discrepancies(self, c: Comparison) -> np.ndarray:
         """Discrepancy of each bootstrap replicate of the real data against the simulated
