@@ -26,8 +26,11 @@ setup(
                    'ros-rcl-interfaces', 'ros-lifecycle-msgs'],
         # rosbag2 (MCAP) recordings without the ROS C++ stack.
         'bags': ['rosbags'],
-        # statsmodels: an independent check of the power and TOST code (docs/statistics.md).
-        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'statsmodels'],
+        # statsmodels: an independent check of the power and TOST code (docs/statistics.md);
+        # hypothesis: property tests of parsers and fitters; arch and allantools: reference
+        # implementations the block-length rule and the Allan deviation are checked against.
+        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'statsmodels', 'hypothesis',
+                 'arch', 'allantools'],
     },
     zip_safe=True,
     maintainer='khepera_noise_ros maintainers',

@@ -303,6 +303,8 @@ def run_case(k: int, rng, genome, options, transfer_trials: int) -> dict:
             'answer_parameters': answer['parameters'] if answer else {},
             'shrink': answer['heldout_reduction'] if answer else None,
             'gap_significant': result.gap_significant, 'transfer': result.transfer,
+            'compound': [c['name'] for c in
+                         (result.to_json().get('compound') or {}).get('chosen', [])],
             'record_s': record_s, 'diagnose_s': diagnose_s}
 
 
@@ -329,6 +331,9 @@ def summary(rows: list[dict], seconds: float) -> dict:
         'located_setting': sum(r['located_setting'] for r in correct) / max(1, len(correct)),
         'median_shrink_effect_cases': float(np.median(shrink_all)) if shrink_all else None,
         'median_shrink_correct': float(np.median(shrink_correct)) if shrink_correct else None,
+        # the compound set of a one-effect case should be that effect alone
+        'compound_exact': float(np.mean([r['compound'] == [r['truth']] for r in effect_rows]))
+        if effect_rows else None,
         'transfer_cases': len(transfers),
         'transfer_gap_before': [r['transfer']['fitness_gap_before'] for r in transfers],
         'transfer_gap_after': [r['transfer']['fitness_gap_after'] for r in transfers],
@@ -385,8 +390,10 @@ def main(argv=None) -> int:
             f" wrong location {row['answer_sensors']} (changed: "
             f"{row['truth_detail'].get('effective')}, set: {row['truth_detail']['location']})")
         shrink = '' if row['shrink'] is None else f" shrink {row['shrink']:.2f}"
-        print(f"{mark}case {k:3d} {row['truth']:26s} -> {row['answer']:26s}{shrink}{where} "
-              f"({row['diagnose_s']:.1f} s)", flush=True)
+        extra = [n for n in row['compound'] if n != row['truth']]
+        added = f" + compound {extra}" if extra else ''
+        print(f"{mark}case {k:3d} {row['truth']:26s} -> {row['answer']:26s}{shrink}{where}"
+              f"{added} ({row['diagnose_s']:.1f} s)", flush=True)
     seconds = time.perf_counter() - started
     s = summary(rows, seconds)
     print()
@@ -396,6 +403,7 @@ def main(argv=None) -> int:
           f"of correct answers ({s['located_setting']:.0%} against the emulator's location "
           f"setting), median held-out shrink {s['median_shrink_effect_cases']:.2f} "
           f"over effect cases ({s['median_shrink_correct']:.2f} over correct ones), "
+          f"compound set exactly the one effect in {s['compound_exact']:.0%} of effect cases, "
           f"{seconds:.0f} s ({s['seconds_per_case']:.1f} s per case)")
     for r in rows:
         if r['transfer']:

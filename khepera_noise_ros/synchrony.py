@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
+from .gap import blocklength
 from .recording import Recording
 
 # Section 2: two light sensors one inch apart, read every second for a minute.
@@ -120,47 +121,10 @@ def fisher_interval(r: float, samples: int, episodes: int = 1,
 
 
 def block_length(x: np.ndarray, segments: list[slice]) -> int:
-    """Block length for the moving-block bootstrap (Politis and White 2004, with Patton et al.
-
-    2009's correction), taken as the longest any used sensor's fluctuations need:
-    white noise gets short blocks, slow drift long ones.  At least 1, at most a
-    third of the shortest episode.
-    """
-    n = min(s.stop - s.start for s in segments)
-    if n < 6:
-        return 1
-    acov = _autocovariance(x, segments, max_lag=n // 2)          # (lags + 1, C)
-    lengths = [_politis_white(acov[:, c], n) for c in range(x.shape[1]) if acov[0, c] > 0]
-    return int(min(max(lengths, default=1), max(1, n // 3)))
-
-
-def _autocovariance(x: np.ndarray, segments: list[slice], max_lag: int) -> np.ndarray:
-    """(max_lag + 1, C) autocovariance of centred x, pooled over episodes."""
-    out = np.zeros((max_lag + 1, x.shape[1]))
-    total = sum(s.stop - s.start for s in segments)
-    for s in segments:
-        seg = x[s]
-        for lag in range(min(max_lag, len(seg) - 1) + 1):
-            out[lag] += (seg[lag:] * seg[:len(seg) - lag]).sum(axis=0)
-    return out / total
-
-
-def _politis_white(acov: np.ndarray, n: int) -> float:
-    """Optimal moving-block length of one series from its autocovariance."""
-    rho = acov[1:] / acov[0]
-    k_n = max(5, int(math.sqrt(math.log10(n))))
-    bound = 2 * math.sqrt(math.log10(n) / n)
-    small = np.abs(rho) < bound
-    m = next((m for m in range(len(rho) - k_n + 1) if small[m:m + k_n].all()), len(rho) // 2)
-    big_m = min(2 * max(m, 1), len(rho))
-    lags = np.arange(1, big_m + 1)
-    t = lags / big_m
-    flat_top = np.where(t <= 0.5, 1.0, 2 * (1 - t))
-    g = acov[0] + 2 * (flat_top * acov[lags]).sum()
-    big_g = 2 * (flat_top * lags * acov[lags]).sum()
-    if g <= 0 or big_g == 0:
-        return 1.0
-    return max(1.0, round((2 * big_g ** 2 / (4 / 3 * g ** 2)) ** (1 / 3) * n ** (1 / 3)))
+    """Block length for the moving-block bootstrap: the project's one rule
+    (``gap.blocklength``, Politis and White 2004 with Patton et al. 2009), the longest
+    any used sensor needs, at least 1, at most a third of the shortest episode."""
+    return blocklength.block_length(x, segments)
 
 
 def bootstrap_correlations(x: np.ndarray, segments: list[slice], length: int,

@@ -24,6 +24,8 @@ CASES = [
     (fx.SaturationQuantization((0, 5), 0.0, 450.0, 4.0), [0, 5],
      {'high': (450.0, 4.0), 'step': (4.0, 0.0)}),
     (fx.ActuatorTurnError(0.7, 0.1), [], {'scale': (0.7, 0.1)}),
+    (fx.SaturationQuantization((0, 1, 2, 3, 4, 5, 6, 7), 0.0, 500.0), list(range(8)),
+     {'high': (500.0, 4.0)}),
 ]
 OPTIONS = diagnose.Options(config=CONFIG, replicates=40)
 
@@ -84,3 +86,18 @@ def test_an_effect_fitted_in_bright_light_shrinks_the_gap_in_dim_light():
     assert {k.condition for k in result.held_out_after.keys} <= {'bulb_2ft', None}
     shared = next(e for e in result.effects if e['name'] == 'correlated_noise')
     assert shared['heldout_reduction'] < result.effects[0]['heldout_reduction'] - 0.2
+
+
+def test_isolated_dropouts_to_zero_are_found_located_and_measured():
+    """Two sensors lose 2% of their readings (they read 0): rare events, so a longer
+    recording; the spread they add is named as dropouts, not as noise."""
+    lost = fx.SaturationQuantization((1, 6), dropout=0.02, dropout_value=0.0)
+    from test_gap_support import stationary_protocol
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=60), [lost], seed=5)],
+                               OPTIONS)
+    assert result.top_effect == 'saturation_quantization', result.effects[:2]
+    top = result.effects[0]
+    assert top['sensors'] == [1, 6]
+    assert top['parameters']['dropout'] == pytest.approx(0.02, abs=0.01)
+    assert top['parameters']['dropout_value'] == 0.0
+    assert top['heldout_reduction'] > 0.3

@@ -83,6 +83,15 @@ def _print(result: diagnose.Diagnosis, paths: dict) -> None:
     for e in result.effects:
         print(f"  {e['name']:26s} held-out reduction {e['heldout_reduction']:6.2f} "
               f"{e['sensors'] or ''}")
+    if result.compound is not None:
+        steps = ', '.join(f"{c['name']} ({c['cumulative_reduction']:.2f})"
+                          for c in result.compound.steps)
+        print(f'  compound (cumulative held-out reduction): {steps}')
+    rem = result.remainder or {}
+    if 'heldout_reduction_with_empirical' in rem:
+        print(f"  remainder: {rem['statistics_off']} statistics still off; named effects "
+              f"{rem['heldout_reduction_named']:.2f}, with the empirical model "
+              f"{rem['heldout_reduction_with_empirical']:.2f}")
     if result.transfer:
         t = result.transfer
         print(f"  transfer: fitness gap {t['fitness_gap_before']:.3f} -> "

@@ -2,12 +2,19 @@
 effect explains it, and how far adding that effect shrinks the gap on held-out data.
 
   statistics  block sums of a recording and every compared statistic, bootstrapped
+  closedloop  the closed-loop statistics (fitness factors, turn responses)
+  blocklength the one block-length rule of the project's block bootstraps
+  allan       Allan deviation of the residuals: fast against slow, per sensor and shared
   where       real against simulated statistics: z, Holm, discrepancy, localisation
   replay      a recording's protocol reproduced in the simulator
   simulate    the simulator with effects (EffectEpisodes; also the simulator node's hook)
   effects     simulator-side models of the vocabulary's effects, as a JSON parameter
   target      real recordings held against the simulator, for fitting and scoring
   fit         locating and fitting each effect
+  spreadlaw   laws of the noise's spread against the level
+  limits      dropouts: isolated readings stuck at zero or a limit
+  compound    forward selection of a set of effects, each fitted jointly
+  remainder   what the named effects leave, and its empirical model
   groups      dependence groups by clustering correlations
   split       fit and held-out parts (by episode or by condition)
   diagnose    the three questions, and the verdict

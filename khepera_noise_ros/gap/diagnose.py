@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recording import Recording
 from . import effects as fx
-from . import fit, replay, split, transfer
+from . import allan, compound, fit, remainder, replay, split, transfer
 from .simconfig import SimConfig
 from .target import Target
 from .where import ALPHA, Comparison, entries, localise
@@ -51,6 +51,8 @@ class Options:
     replicates: int = 200
     effects: tuple = fx.NAMES
     where_limit: int = 40
+    compound: bool = True         # forward selection of a set of effects after the best one
+    remainder: bool = True        # describe what is left and fit the empirical model
 
 
 @dataclass
@@ -67,20 +69,49 @@ class Diagnosis:
     held_out_after: Comparison | None = None
     transfer: dict | None = None
     inputs: list = field(default_factory=list)
-    combined: dict | None = None     # the top two effects together, when both count
+    combined: dict | None = None     # the chosen effects together (the compound's summary)
+    compound: compound.Compound | None = None
+    remainder: dict | None = None    # what the named effects leave (held out), empirical model
+    empirical: object | None = None  # the empirical model, when it brings the simulator closer
+    allan: dict | None = None        # Allan deviation profiles, real and simulated (gap.allan)
+
+    @property
+    def fitted_effects(self) -> list:
+        """What fitted_params.yaml loads: the compound set, else the top effect."""
+        if self.compound is not None:
+            return list(self.compound.effects)
+        return [] if self.fitted is None else [self.fitted]
 
     def to_json(self) -> dict:
+        """diagnosis.json: the fixed keys of format 1 plus this project's additions.
+
+        Returns:
+            A dict of plain JSON values (``format``, ``where``, ``effects``,
+            ``top_effect``, ``transfer``, ``compound``, ``remainder``, ``allan``, ...).
+        """
         transfer = self.transfer or {'fitness_gap_before': None, 'fitness_gap_after': None,
                                      'trials': 0}
         return {'format': FORMAT, 'where': self.where, 'effects': self.effects,
                 'top_effect': self.top_effect, 'transfer': transfer,
                 'gap_significant': self.gap_significant, 'combined': self.combined,
                 'localisation': self.localisation,
+                'compound': None if self.compound is None else self.compound.to_json(),
+                'remainder': self.remainder,
+                'allan': self.allan,
                 'notes': self.notes, 'inputs': self.inputs}
 
 
 def check(recordings: list[Recording]) -> None:
-    """Refuse input the diagnosis cannot make sense of, saying what is wrong."""
+    """Refuse input the diagnosis cannot make sense of, saying what is wrong.
+
+    Args:
+        recordings: the real recordings to be diagnosed together (one robot).
+
+    Raises:
+        ValueError: a one-line message naming the recording and what is wrong (none
+            given, too few samples, different channel layouts, no variation, a
+            closed-loop recording without its genome).
+    """
     if not recordings:
         raise ValueError('the diagnosis needs at least one recording')
     for i, rec in enumerate(recordings):
@@ -117,7 +148,25 @@ def _name(rec: Recording, i: int) -> str:
 
 def diagnose(recordings: list[Recording], options: Options = Options(), reality=None,
              transfer_trials: int = 0, transfer_ea=None) -> Diagnosis:
-    """Diagnose the gap between ``recordings`` and the simulator of ``options.config``."""
+    """Diagnose the gap between ``recordings`` and the simulator of ``options.config``.
+
+    Args:
+        recordings: real recordings of one robot (stationary, closed-loop or both).
+        options: the simulator's configuration, seed, hold-out, thresholds, candidates.
+        reality: ``(genomes, seeds) -> fitness`` on the real robot, for the transfer
+            experiment; None to skip it.
+        transfer_trials: trials per arm of the transfer experiment (0: not run).
+        transfer_ea: the evolutionary algorithm's settings for it.
+
+    Returns:
+        The ``Diagnosis``: where the gap lies, every candidate effect alone (ranked),
+        the top effect, the compound set chosen by forward selection, the remainder
+        with its empirical model, the Allan profiles and notes.  ``to_json()`` gives
+        diagnosis.json.
+
+    Raises:
+        ValueError: bad recordings or options (see ``check``), with a one-line message.
+    """
     check(recordings)
     o = options
     notes = _base_notes(recordings, o.base)
@@ -127,6 +176,7 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
     result = Diagnosis(entries(c_full, o.where_limit, o.alpha), localise(c_full, o.alpha), [],
                        'none', None, significant, notes, c_full,
                        inputs=[_describe(r) for r in recordings])
+    result.allan = _allan(full)
     if not significant:
         notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
                      f'from the simulator at family-wise alpha {o.alpha} (Holm)')
@@ -155,16 +205,61 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                 best['p_value'] < o.reduction_alpha:
             result.top_effect, result.fitted = best['name'], best_effect
             result.held_out_after = best_cmp
-            result.combined = _combined(b, scored, d_before, o)
+            if o.compound:
+                result.compound = compound.select(
+                    a, b, (best_effect, best['note'], best_cmp, scored[0][3]), o.effects,
+                    d_before, before_reps, result.held_out_before)
+                result.held_out_after = result.compound.comparison
+                result.combined = {'effects': [e.name for e in result.compound.effects],
+                                   'discrepancy_before': d_before,
+                                   'discrepancy_after': result.compound.discrepancy_after,
+                                   'heldout_reduction': result.compound.reduction}
+            else:
+                result.combined = _combined(b, scored, d_before, o)
         else:
             notes.append(f'no effect explains a significant part of the gap: the best, '
                          f'{best["name"]}, removes {best["heldout_reduction"]:.0%} of the '
                          f'held-out discrepancy, p = {best["p_value"]:.3f} (needs '
                          f'{o.min_reduction:.0%}, p < {o.reduction_alpha})')
+    if significant and o.remainder:
+        _remainder(result, a, b, d_before, o)
     if result.fitted is not None and reality is not None and transfer_trials:
         result.transfer = _transfer(recordings, o, result.fitted, reality, transfer_trials,
                                     transfer_ea)
     return result
+
+
+def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:
+    """What the named effects leave on held-out data, and the empirical model of it."""
+    named = result.fitted_effects
+    after = result.held_out_after if named else result.held_out_before
+    out = remainder.describe(after, d_before, o.alpha)
+    out['named_effects'] = [e.name for e in named]
+    out['heldout_reduction_named'] = 1.0 - after.discrepancy / d_before if d_before > 0 \
+        else 0.0
+    try:
+        empirical = remainder.fit(a.with_given(named))
+        with_empirical = b.compare(named + [empirical]) if empirical is not None else None
+    except Exception as exc:      # noqa: BLE001 - the fallback failing leaves the rest
+        empirical, with_empirical = None, None
+        out['note'] = f'the empirical model could not be fitted: {type(exc).__name__}: {exc}'
+    if empirical is not None:
+        out['empirical'] = fx.to_dict(empirical)
+        out['heldout_reduction_with_empirical'] = 1.0 - with_empirical.discrepancy / d_before \
+            if d_before > 0 else 0.0
+        if with_empirical.discrepancy < after.discrepancy:
+            result.empirical = empirical
+    result.remainder = out
+
+
+def _allan(full: Target) -> dict | None:
+    """Allan deviation profiles of the stationary recordings, real and simulated."""
+    real = [r for r, k in zip(full.recordings, full.kinds) if k == 'stationary']
+    if not real:
+        return None
+    sim = full.simulate(kinds=('stationary',), copies=1)
+    factors = allan.taus(max(r.size for r in replay.runs(real[0])))
+    return allan.compare(allan.profile(real[0], factors), allan.profile(sim[0], factors))
 
 
 def _parsimonious(scored: list, alpha: float) -> list:
@@ -197,7 +292,11 @@ def _score(b: Target, cand: fit.Candidate, d_before: float, before_reps, o: Opti
              'note': cand.note}
     if cand.effect is None or d_before <= 0:
         return entry, None, cand.effect, None
-    after = b.compare([cand.effect])
+    try:
+        after = b.compare([cand.effect])
+    except Exception as exc:      # noqa: BLE001 - the candidate cannot run: not fitting
+        entry['note'] = f'{cand.note}; cannot be scored: {type(exc).__name__}: {exc}'
+        return entry, None, None, None
     after_reps = b.replicate_discrepancies(after)
     reduction = 1.0 - after.discrepancy / d_before
     # Resampling adds noise to both discrepancies, which biases the replicates' reduction

@@ -60,6 +60,9 @@ class SensorGainOffset(_OnSensors):
         g[rows, 0], o[rows, 0] = self.gains, self.offsets
         return lambda level: self.anchor - g * (self.anchor - level) + o
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        return self.process(level.shape[2], level.shape[1], rng)(level)
+
 
 @dataclass(frozen=True)
 class TemporalDrift(_OnSensors):
@@ -87,11 +90,27 @@ class TemporalDrift(_OnSensors):
             return out
         return apply
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        """``process`` over (samples, channels, robots) at once: the AR(1) as a filter."""
+        from scipy.signal import lfilter
+        rows = _rows(self.sensors, level.shape[1])
+        a = float(np.exp(-1.0 / self.time_constant))
+        width = 1 if self.shared else len(rows)
+        z = rng.standard_normal((level.shape[0], width, level.shape[2]))
+        z[0] *= self.sd
+        z[1:] *= np.sqrt(1 - a * a) * self.sd
+        state = lfilter([1.0], [1.0, -a], z, axis=0)
+        out = level.copy()
+        out[:, rows] *= 1.0 + state
+        return out
+
 
 @dataclass(frozen=True)
 class IntensityDependentNoise(_OnSensors):
-    """A flicker all ``sensors`` see at once, larger the darker the reading:
-    reading += z * strength * r * (r / scale) ** exponent, z ~ N(0, 1) shared."""
+    """Noise whose sd follows a spread law of the level r (``gap.spreadlaw``):
+    sd = constant + strength * u * (u / scale) ** exponent, u = r ('dark': larger the
+    darker the reading, a room's flicker) or scale - r ('bright'); one draw for all
+    ``sensors`` at once if ``shared`` (a flicker), else one per sensor."""
 
     name: ClassVar[str] = 'intensity_dependent_noise'
     stage: ClassVar[str] = 'light'
@@ -99,27 +118,46 @@ class IntensityDependentNoise(_OnSensors):
     strength: float = 0.03
     exponent: float = 1.0
     scale: float = DARK
+    constant: float = 0.0
+    direction: str = 'dark'
+    shared: bool = True
+
+    def amplitude(self, level: np.ndarray) -> np.ndarray:
+        r = np.clip(level, 0.0, self.scale)
+        u = r if self.direction == 'dark' else self.scale - r
+        with np.errstate(divide='ignore', invalid='ignore'):
+            law = np.where(u > 0, u * (u / self.scale) ** self.exponent, 0.0)
+        return self.constant + self.strength * np.nan_to_num(law, posinf=0.0)
 
     def process(self, robots: int, channels: int, rng):
         rows = _rows(self.sensors, channels)
 
         def apply(level):
             out = level.copy()
-            r = np.clip(level[rows], 0.0, None)
-            out[rows] += rng.standard_normal(robots) * self.strength * r \
-                * (r / self.scale) ** self.exponent
+            z = rng.standard_normal(robots if self.shared else (len(rows), robots))
+            out[rows] += z * self.amplitude(level[rows])
             return out
         return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        width = 1 if self.shared else len(rows)
+        z = rng.standard_normal((level.shape[0], width, level.shape[2]))
+        out[:, rows] += z * self.amplitude(level[:, rows])
+        return out
 
 
 @dataclass(frozen=True)
 class CorrelatedNoise:
-    """Normal noise shared within each group, sd ``strength`` x the group's mean level."""
+    """Normal noise shared within each group, sd ``strength`` x the group's mean level
+    (the paper's dependent noise) plus ``constant`` (readings, whatever the level)."""
 
     name: ClassVar[str] = 'correlated_noise'
     stage: ClassVar[str] = 'light'
     groups: tuple = ()
     strength: float = 0.01
+    constant: float = 0.0
 
     def process(self, robots: int, channels: int, rng):
         groups = [_rows(g, channels) for g in self.groups]
@@ -128,9 +166,19 @@ class CorrelatedNoise:
             out = level.copy()
             z = rng.standard_normal((len(groups), robots))
             for g, members in enumerate(groups):
-                out[members] += self.strength * level[members].mean(axis=0) * z[g]
+                out[members] += (self.strength * level[members].mean(axis=0)
+                                 + self.constant) * z[g]
             return out
         return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        groups = [_rows(g, level.shape[1]) for g in self.groups]
+        out = level.copy()
+        z = rng.standard_normal((level.shape[0], len(groups), level.shape[2]))
+        for g, members in enumerate(groups):
+            sd = self.strength * level[:, members].mean(axis=1) + self.constant
+            out[:, members] += (sd * z[:, g])[:, None]
+        return out
 
     @property
     def location(self) -> list:
@@ -162,10 +210,20 @@ class SensorLatency(_OnSensors):
             return out
         return apply
 
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        late = np.maximum(np.arange(level.shape[0]) - self.steps, 0)
+        out[:, rows] = level[late][:, rows]
+        return out
+
 
 @dataclass(frozen=True)
 class SaturationQuantization(_OnSensors):
-    """The converter: ``sensors`` rounded to multiples of ``step``, then held in [low, high]."""
+    """The converter: ``sensors`` rounded to the lattice origin + k * ``step``, then held in
+    [low, high];
+    with probability ``dropout`` a reading is lost and reads ``dropout_value`` instead
+    (isolated readings stuck at zero or at a limit)."""
 
     name: ClassVar[str] = 'saturation_quantization'
     stage: ClassVar[str] = 'reading'
@@ -173,16 +231,31 @@ class SaturationQuantization(_OnSensors):
     low: float = 0.0
     high: float = DARK
     step: float = 1.0
+    dropout: float = 0.0
+    dropout_value: float = 0.0
+    origin: float = 0.0           # the lattice is origin + k * step
+
+    def _convert(self, x: np.ndarray, rng) -> np.ndarray:
+        lattice = np.round((x - self.origin) / self.step) * self.step + self.origin
+        out = np.clip(lattice, self.low, self.high)
+        if self.dropout > 0:
+            out = np.where(rng.random(out.shape) < self.dropout, self.dropout_value, out)
+        return out
 
     def process(self, robots: int, channels: int, rng):
         rows = _rows(self.sensors, channels)
 
         def apply(level):
             out = level.copy()
-            out[rows] = np.clip(np.round(level[rows] / self.step) * self.step, self.low,
-                                self.high)
+            out[rows] = self._convert(level[rows], rng)
             return out
         return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        rows = _rows(self.sensors, level.shape[1])
+        out = level.copy()
+        out[:, rows] = self._convert(level[:, rows], rng)
+        return out
 
 
 @dataclass(frozen=True)
@@ -212,9 +285,75 @@ class ActuatorTurnError:
         return ()
 
 
+@dataclass(frozen=True)
+class EmpiricalNoise(_OnSensors):
+    """The remainder no named effect explains, as measured (not a vocabulary name).
+
+    Fast part: per sensor an extra sd (readings) interpolated over ``levels`` from
+    ``spread`` (one row of knots per sensor), mixed across the sensors by the lower
+    triangular ``mixing`` (the fast part's correlation).  Slow part: an AR(1) of
+    correlation time ``slow_time_constant`` samples moving each sensor's gain by
+    ``slow_sd`` (fraction), mixed by ``slow_mixing``.
+    """
+
+    name: ClassVar[str] = 'empirical_noise'
+    stage: ClassVar[str] = 'light'
+    sensors: tuple = ()
+    levels: tuple = (0.0, 525.0)
+    spread: tuple = ()
+    mixing: tuple = ()
+    slow_sd: tuple = ()
+    slow_time_constant: float = 30.0
+    slow_mixing: tuple = ()
+
+    def _arrays(self):
+        n = len(self.sensors)
+        spread = np.asarray(self.spread, float).reshape(n, len(self.levels))
+        mix = np.asarray(self.mixing, float).reshape(n, n) if self.mixing else np.eye(n)
+        slow = np.asarray(self.slow_sd, float) if self.slow_sd else np.zeros(n)
+        smix = np.asarray(self.slow_mixing, float).reshape(n, n) if self.slow_mixing \
+            else np.eye(n)
+        return spread, mix, slow, smix
+
+    def _fast(self, level_rows: np.ndarray, z: np.ndarray, spread, mix) -> np.ndarray:
+        sd = np.stack([np.interp(level_rows[k], self.levels, spread[k])
+                       for k in range(len(self.sensors))])
+        return sd * np.einsum('ij,j...->i...', mix, z)
+
+    def process(self, robots: int, channels: int, rng):
+        rows = _rows(self.sensors, channels)
+        spread, mix, slow, smix = self._arrays()
+        a = float(np.exp(-1.0 / self.slow_time_constant))
+        state = smix @ rng.standard_normal((len(rows), robots))
+
+        def apply(level):
+            nonlocal state
+            out = level.copy()
+            out[rows] = level[rows] * (1.0 + slow[:, None] * state) + self._fast(
+                level[rows], rng.standard_normal((len(rows), robots)), spread, mix)
+            state = a * state + np.sqrt(1 - a * a) * (smix @ rng.standard_normal(state.shape))
+            return out
+        return apply
+
+    def over_time(self, level: np.ndarray, rng) -> np.ndarray:
+        from scipy.signal import lfilter
+        rows = _rows(self.sensors, level.shape[1])
+        spread, mix, slow, smix = self._arrays()
+        a = float(np.exp(-1.0 / self.slow_time_constant))
+        t, n, r = level.shape[0], len(rows), level.shape[2]
+        z = np.einsum('ij,tjr->tir', smix, rng.standard_normal((t, n, r)))
+        z[1:] *= np.sqrt(1 - a * a)
+        state = lfilter([1.0], [1.0, -a], z, axis=0)
+        fast = self._fast(level[:, rows].transpose(1, 0, 2),
+                          rng.standard_normal((n, t, r)), spread, mix).transpose(1, 0, 2)
+        out = level.copy()
+        out[:, rows] = level[:, rows] * (1.0 + slow[None, :, None] * state) + fast
+        return out
+
+
 TYPES = {cls.name: cls for cls in (CorrelatedNoise, IntensityDependentNoise, SensorGainOffset,
                                    TemporalDrift, ActuatorTurnError, SensorLatency,
-                                   SaturationQuantization)}
+                                   SaturationQuantization, EmpiricalNoise)}
 
 
 def parameters(effect) -> dict:
@@ -258,9 +397,29 @@ def _check(effect) -> None:
     if effect.name == 'sensor_latency' and effect.steps < 0:
         raise ValueError(f'sensor_latency steps must be >= 0, got {effect.steps}')
     if effect.name == 'saturation_quantization' and (effect.step <= 0 or
-                                                     effect.low >= effect.high):
-        raise ValueError(f'saturation_quantization needs step > 0 and low < high, got '
+                                                     effect.low >= effect.high or
+                                                     not 0 <= effect.dropout < 1):
+        raise ValueError(f'saturation_quantization needs step > 0, low < high and '
+                         f'0 <= dropout < 1, got '
                          f'{parameters(effect)}')
+    if effect.name == 'empirical_noise':
+        n = len(effect.sensors)
+        if len(effect.levels) < 1 or len(effect.spread) != n * len(effect.levels) or \
+                len(effect.mixing) not in (0, n * n) or len(effect.slow_sd) not in (0, n) or \
+                len(effect.slow_mixing) not in (0, n * n) or effect.slow_time_constant <= 0 \
+                or list(effect.levels) != sorted(effect.levels):
+            raise ValueError('empirical_noise needs sorted levels, one spread per sensor and '
+                             'level, n x n mixings, one slow_sd per sensor and '
+                             'slow_time_constant > 0')
+        if not all(np.all(np.isfinite(np.asarray(v, float))) for v in (
+                effect.levels, effect.spread, effect.mixing, effect.slow_sd,
+                effect.slow_mixing)):
+            raise ValueError('empirical_noise: values must be finite')
+    if effect.name == 'intensity_dependent_noise' and (
+            effect.direction not in ('dark', 'bright') or effect.constant < 0 or
+            effect.scale <= 0 or effect.exponent < -1):
+        raise ValueError(f"intensity_dependent_noise needs direction 'dark' or 'bright', "
+                         f"constant >= 0, scale > 0, exponent >= -1, got {parameters(effect)}")
     if effect.name == 'temporal_drift' and effect.time_constant <= 0:
         raise ValueError(f'temporal_drift time_constant must be > 0, got '
                          f'{effect.time_constant}')

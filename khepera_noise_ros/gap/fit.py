@@ -18,6 +18,7 @@ Fingerprints (what the statistics of ``gap.statistics`` show):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -27,13 +28,15 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from .groups import cluster, excess_evidence
+from . import limits, spreadlaw
+from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
 from .where import ALPHA, Comparison, holm
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
+MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 
 
 @dataclass
@@ -112,28 +115,44 @@ def saturation(target: Target, c: Comparison) -> Candidate:
             low[sensor] = ends[0]
         if ends[1] is not None:
             high[sensor] = ends[1]
-        step = _grid(x[(x > x.min()) & (x < x.max())])
-        if step > 1 and sensor in grid_flag:
-            grid[sensor] = step
-    if not (low or high or grid):
-        return Candidate(name, None, 'no readings held at a limit and no coarse value grid')
-    steps = list(grid.values())
-    step = float(max(set(steps), key=steps.count)) if steps else 1.0
+        lattice = _grid(x[(x > x.min()) & (x < x.max())])
+        # closed-loop statistics have no granularity: there the simulator's own readings
+        # not lying on the real lattice is the evidence
+        measured = sensor in grid_flag if _rows(c, 'granularity') else \
+            _grid(y[(y > y.min()) & (y < y.max())]) != lattice
+        if lattice[0] > 1 and measured:
+            grid[sensor] = lattice
+    stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    lost = limits.dropouts(stationary, target.simulate(kinds=('stationary',)),
+                           reading_range(rec.manifest, rec.channels))
+    if not (low or high or grid or lost):
+        return Candidate(name, None, 'no readings held at a limit, no coarse value grid and '
+                                     'no dropouts')
+    drop = {}
+    if lost:
+        values = [v for v, _ in lost.values()]
+        drop = {'dropout': round(float(np.median([r for _, r in lost.values()])), 5),
+                'dropout_value': max(set(values), key=values.count)}
+    lattices = list(grid.values())
+    step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
             sensors = set(grid) | (set(low) if use_low else set()) | \
-                (set(high) if use_high else set())
+                (set(high) if use_high else set()) | set(lost)
             if sensors:
                 options.append(fx.SaturationQuantization(
                     tuple(sorted(sensors)),
                     low=float(np.median(list(low.values()))) if use_low else 0.0,
                     high=float(np.median(list(high.values()))) if use_high else ANCHOR,
-                    step=step))
-    effect = min(options, key=lambda e: target.objective([e], ('stationary',)))
+                    step=float(step), origin=float(origin), **drop))
+    kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
+    effect = min(options, key=lambda e: target.objective([e], kinds))
     what = [w for w, found in (('clipped below', effect.low > 0),
                                ('clipped above', effect.high < ANCHOR),
-                               ('on a grid', effect.step > 1)) if found]
+                               ('on a grid', effect.step > 1),
+                               (f'dropping out to {effect.dropout_value:g} at rate '
+                                f'{effect.dropout:.2%}', effect.dropout > 0)) if found]
     return Candidate(name, effect, f'{_names(effect.sensors)} {" and ".join(what)}')
 
 
@@ -154,27 +173,48 @@ def _clipped_ends(real: np.ndarray, sim: np.ndarray, limits) -> tuple:
     return tuple(out)
 
 
-def _grid(x: np.ndarray) -> int:
-    """The coarsest step (2..32) on which nearly all integer readings ``x`` lie, else 1."""
+def _grid(x: np.ndarray) -> tuple[int, int]:
+    """(step, origin): the coarsest lattice origin + k * step (step 2..32) on which nearly
+    all integer readings ``x`` lie, else (1, 0)."""
     if x.size < 20 or not np.all(x == np.round(x)):
-        return 1
+        return 1, 0
     for q in range(32, 1, -1):
-        if np.bincount(np.mod(x, q).astype(np.int64)).max() >= 0.95 * x.size:
-            return q
-    return 1
+        counts = np.bincount(np.mod(x, q).astype(np.int64))
+        if counts.max() >= 0.95 * x.size:
+            return q, int(counts.argmax())
+    return 1, 0
 
 
 # --- correlated_noise ------------------------------------------------------------------
 
+def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndarray:
+    """Excess correlation of the fast (or slow) part of the residuals, real against
+    simulated, from the stationary recordings; the comparison's own correlations (the
+    whole residual) when there are none."""
+    channels = _channels(target)
+    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    if not real:
+        return excess_evidence(c, channels)[0]
+    sim = target.simulate(kinds=('stationary',))
+    return part_evidence(real, sim, channels, part)[0]
+
+
 def correlated(target: Target, c: Comparison) -> Candidate:
     name = fx.CorrelatedNoise.name
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c)
     groups = [tuple(channels[i] for i in g) for g in cluster(evidence)]
     if not groups:
         return Candidate(name, None, 'no sensors whose noise is more correlated than simulated')
     start = _shared_strength(c, groups)
     effect = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), s), start)
+    # shared noise of a fixed size in readings (a supply, a converter), not a share of
+    # the level: one more form of the same effect, kept if the simulator says so
+    level = np.mean([r for k, r, *_ in _rows(c, 'level')] or [ANCHOR / 2])
+    fixed = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), 0.0, s),
+                    start * level, evaluations=5)
+    if target.objective([fixed]) < target.objective([effect]):
+        effect = fixed
     return Candidate(name, effect, f'excess correlation clusters into {_groups(groups)}')
 
 
@@ -205,6 +245,8 @@ def _by_condition(c: Comparison, family: str) -> dict:
 
 def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
     """The effect ``make(x)`` with x refined on a log scale around ``start``."""
+    start = float(np.clip(start, 1e-5, 1e3)) if np.isfinite(start) else 0.01
+    kinds = _present(target, kinds)
     lo, hi = math.log(start / 3), math.log(start * 3)
     best = _golden(lambda u: target.objective([make(math.exp(u))], kinds), lo, hi,
                    evaluations)
@@ -214,31 +256,38 @@ def _refine(target: Target, make, start: float, kinds=('stationary',), evaluatio
 # --- intensity_dependent_noise ---------------------------------------------------------
 
 def intensity(target: Target, c: Comparison) -> Candidate:
+    """Extra spread that follows a law of the level (``gap.spreadlaw``): on the sensors
+    whose fast noise is more correlated than simulated (one shared draw), else on those
+    with extra spread (a draw per sensor)."""
     name = fx.IntensityDependentNoise.name
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c)
     clusters = cluster(evidence)
     if clusters:
         best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
-        sensors = tuple(channels[i] for i in best)
+        sensors, shared = tuple(channels[i] for i in best), True
     else:
         sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
                                 if z > Z_DETECT}))
+        shared = False
     if not sensors:
         return Candidate(name, None, 'no extra spread or shared noise to explain')
     cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
              for s in [_level(c, k)] if s is not None]
-    best_fit = None
-    for exponent in (0.0, 1.0, 2.0, 3.0):
-        strength = _flicker_strength(cells, exponent)
-        effect = fx.IntensityDependentNoise(sensors, strength, exponent)
-        d = target.objective([effect])
-        if best_fit is None or d < best_fit[0]:
-            best_fit = (d, exponent, strength)
-    _, exponent, strength = best_fit
-    effect = _refine(target, lambda s: fx.IntensityDependentNoise(sensors, s, exponent),
-                     strength, evaluations=5)
-    return Candidate(name, effect, f'extra spread on {_names(sensors)} growing with the level')
+    options = [fx.IntensityDependentNoise(sensors, round(k, 6), e, ANCHOR, round(c0, 4), d,
+                                          shared)
+               for d, e, c0, k, _ in spreadlaw.laws(cells)]
+    options = [o for o in options if o.strength > 0 or o.constant > 0]
+    if not options:
+        return Candidate(name, None, 'extra spread fits no spread law')
+    best_effect = min(options, key=lambda e: target.objective([e]))
+    if best_effect.strength > 0:
+        best_effect = _refine(target, lambda s: dataclasses.replace(best_effect, strength=s),
+                              best_effect.strength, evaluations=5)
+    law = spreadlaw.describe(best_effect.direction, best_effect.exponent,
+                             best_effect.constant, best_effect.strength)
+    kind = 'one shared draw' if shared else 'a draw per sensor'
+    return Candidate(name, best_effect, f'extra spread on {_names(sensors)}: {law}, {kind}')
 
 
 def _level(c: Comparison, key) -> float | None:
@@ -246,13 +295,6 @@ def _level(c: Comparison, key) -> float | None:
         if k.sensors == key.sensors and k.condition == key.condition and k.part == key.part:
             return s
     return None
-
-
-def _flicker_strength(cells, exponent: float) -> float:
-    """Moment estimate: excess variance = (strength * L * (L / 525) ** exponent) ** 2."""
-    num = sum(max(v, 0.0) for L, v in cells)
-    den = sum((L * (L / ANCHOR) ** exponent) ** 2 for L, v in cells)
-    return float(np.sqrt(num / den)) if den > 0 and num > 0 else 0.01
 
 
 # --- temporal_drift --------------------------------------------------------------------
@@ -265,7 +307,7 @@ def drift(target: Target, c: Comparison) -> Candidate:
         return Candidate(name, None, 'no extra autocorrelation over time and no level '
                                      'offsets beyond a fixed calibration')
     channels = _channels(target)
-    evidence, _ = excess_evidence(c, channels)
+    evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
     shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
         > Z_DETECT
@@ -281,8 +323,10 @@ def drift(target: Target, c: Comparison) -> Candidate:
     sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
 
     def make(x, shared=shared):
-        return fx.TemporalDrift(sensors, round(math.exp(x[0]), 5), round(math.exp(x[1]), 2),
-                                bool(shared))
+        # bounded so that the model can always run: a time constant of 0 has no AR(1)
+        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), 1e-5, 2.0))
+        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), MIN_TIME_CONSTANT, 1e5))
+        return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
                           [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
@@ -354,7 +398,13 @@ def latency(target: Target, c: Comparison) -> Candidate:
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 
 
+def _present(target: Target, kinds):
+    """``kinds`` if the target has recordings of them, else all of its recordings."""
+    return kinds if kinds is None or set(kinds) & set(target.kinds) else None
+
+
 def _best_delay(target: Target, sensors, delays, kinds=('stationary',)) -> int:
+    kinds = _present(target, kinds)
     return min(delays, key=lambda d: target.objective([fx.SensorLatency(sensors, d)], kinds))
 
 
@@ -365,10 +415,12 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     rows = [(r, s) for k, r, s, se, z in _rows(c, 'turn_response') if k.part == 'lag 0']
     if not rows:
         return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
-    if not any(abs(z) > Z_DETECT for family in ('turn_response', 'sensor_turn_response')
-               for *_, z in _rows(c, family)):
+    families = ('turn_response', 'sensor_turn_response', 'turn_size')
+    if not any(abs(z) > Z_DETECT for family in families for *_, z in _rows(c, family)):
         return Candidate(name, None, 'the readings respond to turns as simulated')
-    real, sim = np.mean(rows, axis=0)
+    # recorded headings measure the turn itself; else the readings' response to it
+    size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
+    real, sim = np.mean(size if size else rows, axis=0)
     scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
 
     def objective(scale, slip):
@@ -387,7 +439,34 @@ FITTERS = {fx.SensorGainOffset.name: gain_offset, fx.SaturationQuantization.name
 
 
 def fit_all(target: Target, c: Comparison, names=tuple(FITTERS)) -> list[Candidate]:
-    return [FITTERS[n](target, c) for n in names]
+    """Every named candidate fitted; one that fails is reported as not fitting."""
+    return [fit_one(n, target, c) for n in names]
+
+
+def fit_one(name: str, target: Target, c: Comparison, fitter=None) -> Candidate:
+    """``FITTERS[name]`` run so that no failure escapes: an exception, or parameters the
+    effect's own model cannot run (checked by a short trial), end as a candidate with
+    no effect and a note saying why; the rest of the diagnosis carries on."""
+    try:
+        cand = (fitter or FITTERS[name])(target, c)
+        if cand.effect is not None:
+            runnable(cand.effect)
+        return cand
+    except Exception as exc:      # noqa: BLE001 - one candidate's failure is its own
+        return Candidate(name, None, f'the fit failed: {type(exc).__name__}: {exc}')
+
+
+def runnable(effect) -> None:
+    """Raise ValueError unless ``effect`` passes its checks and runs a few steps."""
+    effect = fx.from_dict(fx.to_dict(effect))
+    if effect.stage == 'turn':
+        out = effect.process(2, 8, np.random.default_rng(0))(np.array([10.0, -10.0]))
+    else:
+        channels = max([8] + [s + 1 for s in effect.sensors])
+        apply = effect.process(2, channels, np.random.default_rng(0))
+        out = [apply(np.full((channels, 2), 200.0)) for _ in range(3)][-1]
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f'{effect.name} gives non-finite readings with {fx.to_dict(effect)}')
 
 
 def _names(sensors) -> str:

@@ -64,3 +64,73 @@ def _combine(rows, channels) -> tuple[np.ndarray, np.ndarray]:
         z = np.where(count > 0, zsum / np.sqrt(count), 0.0)
         mean = np.where(count > 0, vsum / count, 0.0)
     return z, mean
+
+
+# -- fast and slow parts of the residuals -----------------------------------------------
+
+SLOW_WINDOW = 8      # samples averaged into one value of the slow part
+
+
+def part_sums(rec, part: str) -> dict:
+    """{condition: (cross-product matrix, count)} of the ``part`` of run residuals:
+    'fast' = first differences within a run (a slow change cancels); 'slow' = means
+    of consecutive windows of ``SLOW_WINDOW`` samples about the run's mean (white
+    noise averages down)."""
+    from . import replay
+    used = list(rec.channels_used)
+    out: dict = {}
+    for r in replay.runs(rec):
+        y = rec.readings[r][:, used].astype(np.float64)
+        if part == 'fast':
+            d = np.diff(y, axis=0)
+        else:
+            k = y.shape[0] // SLOW_WINDOW
+            d = (y[:k * SLOW_WINDOW] - y.mean(axis=0)).reshape(k, SLOW_WINDOW, -1).mean(axis=1)
+        if d.shape[0] < 2:
+            continue
+        d = d - d.mean(axis=0) if part == 'fast' else d
+        acc = out.setdefault(str(rec.condition[r[0]]), [0.0, 0])
+        acc[0] = acc[0] + d.T @ d
+        acc[1] += d.shape[0]
+    return out
+
+
+def part_evidence(real: list, sim: list, channels, part: str) -> tuple[np.ndarray, np.ndarray]:
+    """(z, excess) matrices for the ``part`` ('fast' or 'slow') of the residuals: Fisher z
+    of real against simulated correlation per condition, Stouffer-combined."""
+    n = len(channels)
+    zsum, vsum, count = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    pooled = [_pool([part_sums(r, part) for r in recs]) for recs in (real, sim)]
+    for cond, (sr, nr) in pooled[0].items():
+        if cond not in pooled[1] or nr < 8:
+            continue
+        ss, ns = pooled[1][cond]
+        cr, cs = _corr(sr), _corr(ss)
+        se = np.sqrt(1.0 / max(nr - 3, 1) + 1.0 / max(ns - 3, 1))
+        with np.errstate(invalid='ignore'):
+            z = (np.arctanh(np.clip(cr, -0.999, 0.999)) -
+                 np.arctanh(np.clip(cs, -0.999, 0.999))) / se
+        ok = np.isfinite(z)
+        zsum += np.where(ok, z, 0.0)
+        vsum += np.where(ok, cr - cs, 0.0)
+        count += ok
+    with np.errstate(invalid='ignore', divide='ignore'):
+        z = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+        mean = np.where(count > 0, vsum / count, 0.0)
+    np.fill_diagonal(z, 0.0)
+    return z, mean
+
+
+def _pool(parts: list) -> dict:
+    out: dict = {}
+    for p in parts:
+        for cond, (s, n) in p.items():
+            acc = out.setdefault(cond, [0.0, 0])
+            acc[0] = acc[0] + s
+            acc[1] += n
+    return out
+
+
+def _corr(s: np.ndarray) -> np.ndarray:
+    d = np.sqrt(np.clip(np.diag(s), 1e-12, None))
+    return s / d[:, None] / d[None, :]

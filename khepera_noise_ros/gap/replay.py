@@ -102,6 +102,48 @@ def _stationary(rec, config, effects, seed, replicates, mode) -> Recording:
     """Each episode is simulated as one continuous run through its headings and conditions,
     so effects with memory (drift, latency) carry over from one heading to the next."""
     episodes, column = np.unique(rec.episode, return_inverse=True)
+    light, noise, scale = _light(rec, config, mode)
+    light = np.tile(light, (1, 1, replicates))     # copies side by side
+    sim = stationary(light, noise, effects, seed=seed) * scale
+    readings = np.concatenate([sim[rec.step, :, column + k * episodes.size]
+                               for k in range(replicates)])
+    return _indexed(rec, replicates, readings)
+
+
+_INDEX: dict = {}
+
+
+def _indexed(rec: Recording, replicates: int, readings: np.ndarray) -> Recording:
+    """A replay of stationary ``rec``: its index columns (episode, step, heading,
+    condition) are built once per recording and number of copies and shared by every
+    replay, so statistics can reuse their layout (``statistics._layout``)."""
+    key = (id(rec), replicates)
+    hit = _INDEX.get(key)
+    if hit is None or hit[0] is not rec:
+        everything = np.arange(len(rec))
+        parts = [_rows(rec, everything, None, k) for k in range(replicates)]
+        cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != 'readings'}
+        manifest = {k: v for k, v in rec.manifest.items() if k not in ('source', 'samples',
+                                                                       'lost_steps')}
+        manifest['source'] = 'simulator'
+        if len(_INDEX) > 64:
+            _INDEX.clear()
+        hit = _INDEX[key] = (rec, cols, manifest)
+    return Recording(**hit[1], readings=readings, manifest=dict(hit[2]))
+
+
+_LIGHT: dict = {}
+
+
+def _light(rec: Recording, config: SimConfig, mode: str) -> tuple:
+    """(samples, channels, episodes) light of every step of ``rec``'s episodes, the noise
+    model to use and the scale of the readings; computed once per recording and
+    configuration (every replay of a protocol sees the same light)."""
+    key = (id(rec), config.world, config.noise, mode)
+    hit = _LIGHT.get(key)
+    if hit is not None and hit[0] is rec:
+        return hit[1]
+    episodes, column = np.unique(rec.episode, return_inverse=True)
     length = int(rec.step.max()) + 1
     light = np.full((length, rec.channels, episodes.size), np.nan)
     if mode == 'model':
@@ -116,12 +158,11 @@ def _stationary(rec, config, effects, seed, replicates, mode) -> Recording:
             light[rec.step[r], :, column[r[0]]] = np.nan_to_num(rec.readings[r].mean(axis=0))
         scale = max(1.0, float(np.nanmax(light)) / DARK)    # the model's noise is proportional
         noise = _noise_within(config.noise, rec.channels)
-    light = np.tile(_hold(light) / scale, (1, 1, replicates))     # copies side by side
-    sim = stationary(light, noise, effects, seed=seed) * scale
-    everything = np.arange(len(rec))
-    out = [_rows(rec, everything, sim[rec.step, :, column + k * episodes.size], k)
-           for k in range(replicates)]
-    return _concat(out, rec, config)
+    out = (_hold(light) / scale, noise, scale)
+    if len(_LIGHT) > 64:
+        _LIGHT.clear()
+    _LIGHT[key] = (rec, out)
+    return out
 
 
 def _hold(light: np.ndarray) -> np.ndarray:

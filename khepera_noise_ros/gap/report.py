@@ -5,6 +5,10 @@ Figures (PNG, matplotlib without a display):
   spread.png        spread against light level, every sensor and cell, real and simulated
   shrink.png        held-out discrepancy per statistic family before and after the top effect
   effects.png       held-out reduction of every candidate effect
+  waterfall.png     the compound: each chosen effect's added and cumulative held-out shrink,
+                    and the empirical remainder model's beside them
+  allan.png         Allan deviation of the residuals over averaging time, per sensor and
+                    for the shared component, real and simulated (``gap.allan``)
 """
 from __future__ import annotations
 
@@ -25,12 +29,20 @@ def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {'diagnosis': write_json(out / 'diagnosis.json', diagnosis.to_json())}
-    if diagnosis.fitted is not None:
+    fitted = diagnosis.fitted_effects
+    if fitted:
+        names = ', '.join(e.name for e in fitted)
         paths['params'] = simconfig.write(
-            config.with_effects(diagnosis.fitted), out / 'fitted_params.yaml',
-            header=f'khepera-noise diagnose: the simulator with the fitted '
-                   f'{diagnosis.top_effect}\nload with: --ros-args --params-file '
-                   f'fitted_params.yaml')
+            config.with_effects(*fitted), out / 'fitted_params.yaml',
+            header=f'khepera-noise diagnose: the simulator with the fitted {names}\n'
+                   f'load with: --ros-args --params-file fitted_params.yaml')
+    if diagnosis.empirical is not None:
+        paths['params_with_remainder'] = simconfig.write(
+            config.with_effects(*fitted, diagnosis.empirical),
+            out / 'fitted_params_with_remainder.yaml',
+            header='khepera-noise diagnose: the fitted effects plus the empirical model of '
+                   'what they leave\nload with: --ros-args --params-file '
+                   'fitted_params_with_remainder.yaml')
     drawn = draw(diagnosis, out) if figures else {}
     paths.update(drawn)
     paths['report'] = atomic_write_text(out / 'report.md', markdown(diagnosis, drawn, paths))
@@ -45,7 +57,8 @@ def draw(d: Diagnosis, out: Path) -> dict:
     import matplotlib.pyplot as plt
     drawn = {}
     for name, painter in (('correlation', _correlation), ('spread', _spread),
-                          ('shrink', _shrink), ('effects', _effects)):
+                          ('shrink', _shrink), ('effects', _effects),
+                          ('waterfall', _waterfall), ('allan', _allan)):
         fig = painter(d, plt)
         if fig is not None:
             path = out / f'{name}.png'
@@ -143,6 +156,54 @@ def _effects(d: Diagnosis, plt):
     return fig
 
 
+def _waterfall(d: Diagnosis, plt):
+    if d.compound is None:
+        return None
+    steps = d.compound.steps
+    names = [s['name'] for s in steps]
+    added = [s['added_reduction'] for s in steps]
+    bottom = [s['cumulative_reduction'] - s['added_reduction'] for s in steps]
+    rem = d.remainder or {}
+    if 'heldout_reduction_with_empirical' in rem:
+        names.append('empirical remainder')
+        added.append(rem['heldout_reduction_with_empirical'] - rem['heldout_reduction_named'])
+        bottom.append(rem['heldout_reduction_named'])
+    fig, ax = plt.subplots(figsize=(6.4, 3.4))
+    colours = ['C0'] * len(steps) + ['C7'] * (len(names) - len(steps))
+    ax.bar(range(len(names)), added, bottom=bottom, color=colours)
+    for i, (a, b) in enumerate(zip(added, bottom)):
+        ax.text(i, a + b + 0.01, f'{a + b:.2f}', ha='center', fontsize=8)
+    ax.set_xticks(range(len(names)), names, rotation=25, ha='right', fontsize=8)
+    ax.set_ylim(min(0.0, min(bottom)), 1.05)
+    ax.set_ylabel('held-out discrepancy removed (cumulative)')
+    ax.set_title('Compound diagnosis: effects in the order chosen')
+    return fig
+
+
+def _allan(d: Diagnosis, plt):
+    a = d.allan
+    if not a:
+        return None
+    fig, ax = plt.subplots(figsize=(6, 4))
+    t = a['taus']
+    for k, (sensor, dev) in enumerate(a['real']['sensors'].items()):
+        ax.loglog(t, dev, color='C0', alpha=0.35, lw=1, label='real, per sensor' if k == 0
+                  else None)
+        sim = a['simulated']['sensors'].get(sensor)
+        if sim:
+            ax.loglog(t, sim, color='C1', alpha=0.35, lw=1, ls='--',
+                      label='simulated, per sensor' if k == 0 else None)
+    ax.loglog(t, a['real']['shared'], color='C0', lw=2.5, label='real, shared component')
+    ax.loglog(t, a['simulated']['shared'], color='C1', lw=2.5, ls='--',
+              label='simulated, shared component')
+    ax.set_xlabel('averaging time (samples)')
+    ax.set_ylabel('Allan deviation (reading units)')
+    ax.set_title('Fast against slow: slope -1/2 white, 0 flicker, +1/2 walk, +1 drift',
+                 fontsize=9)
+    ax.legend(fontsize=7)
+    return fig
+
+
 # --- markdown --------------------------------------------------------------------------
 
 def markdown(d: Diagnosis, drawn: dict, paths: dict) -> str:
@@ -188,6 +249,38 @@ def markdown(d: Diagnosis, drawn: dict, paths: dict) -> str:
                          f"removed).")
     else:
         lines.append('No effect was added.')
+    if d.compound is not None:
+        lines += ['', '### Compound (forward selection, each effect fitted jointly with those '
+                      'before it)', '', '| step | effect | sensors | added shrink | cumulative | '
+                  'p | parameters |', '| --- | --- | --- | --- | --- | --- | --- |']
+        for i, c in enumerate(d.compound.steps):
+            lines.append(f"| {i + 1} | {c['name']} | {_sensors(c['sensors'])} | "
+                         f"{c['added_reduction']:.3f} | {c['cumulative_reduction']:.3f} | "
+                         f"{c['p_value']:.3f} | {_params(c['parameters'])} |")
+        for r in d.compound.rejected:
+            lines.append(f"\nNext best, not kept: {r['name']} (added {r['added_reduction']:.3f}"
+                         f", p = {r['p_value']:.3f}).")
+    if d.remainder:
+        r = d.remainder
+        lines += ['', '### What is left', '',
+                  f"After {', '.join(r['named_effects']) or 'no named effect'}: "
+                  f"{r['statistics_off']} statistics still differ significantly; "
+                  f"{r['share_of_gap_left']:.0%} of the held-out discrepancy is left."]
+        if 'heldout_reduction_with_empirical' in r:
+            lines.append(f"Named effects remove {r['heldout_reduction_named']:.0%}; with the "
+                         f"empirical remainder model {r['heldout_reduction_with_empirical']:.0%}"
+                         f" (fitted_params_with_remainder.yaml).")
+        for e in r['where'][:8]:
+            lines.append(f"- {e['statistic']} {_sensors(e['sensors'])} {e['condition'] or ''} "
+                         f"{e['part'] or ''}: simulated {e['sim']:.4g}, real {e['real']:.4g} "
+                         f"(z {e['significance']:.1f})")
+    if d.allan:
+        sh = d.allan.get('shared', {})
+        if sh:
+            lines += ['', f"Allan deviation of the shared component: real {sh['real_term']}, "
+                          f"simulated {sh['simulated_term']} at the longest averaging times; "
+                          f"real/simulated {sh['long_ratio'] or float('nan'):.2f} there, "
+                          f"{sh['short_ratio'] or float('nan'):.2f} at one sample."]
     if d.transfer:
         t = d.transfer
         p = 'n/a' if t['gap_p'] is None else f"{t['gap_p']:.3g}"

@@ -134,16 +134,23 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
     """(samples, channels, units) readings of units whose light is ``base`` at each sample,
     (samples, channels, units): each unit is one continuous run (effects keep their state).
 
+    The whole run is computed at once: each effect's ``over_time`` acts on every sample
+    (a drift as a filter over time), then the model's noise on every sample together.
     The model's dependence groups must lie within the channels; effects may name any.
     """
     samples, channels, robots = base.shape
     rng = np.random.default_rng(_entropy(seed))
-    light = [e.process(robots, channels, rng) for e in _staged(effects, 'light')]
-    reading = [e.process(robots, channels, rng) for e in _staged(effects, 'reading')]
+    level = np.asarray(base, np.float64)
+    for e in _staged(effects, 'light'):
+        level = e.over_time(level, rng)
+    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
     groups = max(1, len(noise.groups))
     draws = np.random.default_rng([int(seed), 0x5A7]).integers(
         0, int(UNIT) + 1, size=(samples, channels + groups, robots), dtype=np.uint16)
-    out = np.empty((samples, channels, robots))
-    for t in range(samples):
-        out[t] = sense(base[t], noise, draws[t, :channels], draws[t, channels:], light, reading)
-    return out
+    flat = np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(channels, -1)
+    d = draws.transpose(1, 0, 2).reshape(channels + groups, -1)
+    out = noise.apply(flat, d[:channels], d[channels:]).astype(np.float64)
+    out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
+    for e in _staged(effects, 'reading'):
+        out = e.over_time(out, rng)
+    return np.clip(np.rint(out), 0.0, DARK)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -23,6 +24,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
+from . import blocklength
 
 LAGS = (1, 3)                    # autocorrelation lags, in steps
 MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity family
@@ -127,36 +129,37 @@ def units(rec: Recording, cell: np.ndarray) -> list[np.ndarray]:
 
 
 def block_length(rec: Recording, channels) -> int:
-    """Blocks twice the integrated autocorrelation time of the residuals, at least 5."""
+    """The project's one block-length rule (``gap.blocklength``) over the residuals of
+    each run; at least 5 samples (a block carries spreads and lagged products), at
+    most half the longest run."""
     labels, cell = cells(rec)
-    runs = units(rec, cell)
-    x = rec.readings[:, list(channels)]
-    longest = max((r.size for r in runs), default=1)
-    acf = []
-    for lag in range(1, max(2, longest // 4)):
-        num = den = 0.0
-        for r in runs:
-            y = x[r] - x[r].mean(axis=0)
-            if r.size > lag:
-                num += float((y[:-lag] * y[lag:]).sum())
-            den += float((y * y).sum())
-        rho = num / den if den > 0 else 0.0
-        if rho < 0.05:
-            break
-        acf.append(rho)
-    tau = 1.0 + 2.0 * sum(acf)
-    return int(min(max(5, int(np.ceil(2 * tau))), max(2, longest // 2)))
-
-
-def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
-    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
-    channels = tuple(channels)
-    labels, cell = cells(rec)
+    runs = [r for r in units(rec, cell) if r.size >= 2]
+    if not runs:
+        return 5
     x = rec.readings[:, list(channels)].astype(np.float64)
+    y = np.concatenate([x[r] - x[r].mean(axis=0) for r in runs])
+    edges = np.cumsum([0] + [r.size for r in runs])
+    segments = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    longest = max(r.size for r in runs)
+    return blocklength.block_length(y, segments, minimum=5, maximum=max(5, longest // 2))
+
+
+_LAYOUTS: OrderedDict = OrderedDict()
+LAYOUT_CACHE = 32
+
+
+def _layout(rec: Recording, length: int) -> dict:
+    """How samples fall into cells, runs and blocks: the same for every replay of a
+    protocol (``gap.replay`` reuses the index columns of a replay), so it is cached by
+    the identity of those columns (references are held, so identities stay unique)."""
+    cols = (rec.episode, rec.step, rec.heading_deg, rec.condition)
+    key = tuple(id(c) for c in cols) + (length,)
+    hit = _LAYOUTS.get(key)
+    if hit is not None:
+        _LAYOUTS.move_to_end(key)
+        return hit[1]
+    labels, cell = cells(rec)
     runs = units(rec, cell)
-    y = x.copy()
-    for r in runs:                     # residuals about each run's own mean: the same
-        y[r] -= x[r].mean(axis=0)      # small bias for real and simulated runs alike
     order = np.concatenate(runs)
     run_of = np.repeat(np.arange(len(runs)), [r.size for r in runs])
     position = np.concatenate([np.arange(r.size) for r in runs])
@@ -167,27 +170,54 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     order, block, run_of = order[keep], block[keep], run_of[keep]
     _, block = np.unique(block, return_inverse=True)
     nb = int(block.max()) + 1 if block.size else 0
+    block_of = np.full(len(rec), -1)
+    block_of[order] = block
+    stratum = np.zeros(nb, np.int64)
+    stratum[block] = cell[order]
+    out = {'labels': labels, 'cell': cell, 'runs': runs, 'order': order, 'block': block,
+           'nb': nb, 'block_of': block_of, 'stratum': stratum,
+           'lags': _lag_pairs(rec.step[order], run_of)}
+    _LAYOUTS[key] = (cols, out)
+    if len(_LAYOUTS) > LAYOUT_CACHE:
+        _LAYOUTS.popitem(last=False)
+    return out
+
+
+def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
+    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
+    channels = tuple(channels)
+    lay = _layout(rec, length)
+    labels, cell, runs = lay['labels'], lay['cell'], lay['runs']
+    order, block, nb = lay['order'], lay['block'], lay['nb']
+    x = rec.readings[:, list(channels)].astype(np.float64)
+    y = x.copy()
+    for r in runs:                     # residuals about each run's own mean: the same
+        y[r] -= x[r].mean(axis=0)      # small bias for real and simulated runs alike
     yo, xo = y[order], x[order]
+    # products in single precision (sums over a block of at most a few hundred samples
+    # keep 6 digits), levels and first moments in double
+    y32 = yo.astype(np.float32)
+    upper = np.triu_indices(len(channels))
+    s2 = np.zeros((nb, len(channels), len(channels)))
+    s2[:, upper[0], upper[1]] = _block_sum(block, y32[:, upper[0]] * y32[:, upper[1]], nb)
+    s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
     parts = {'n': np.bincount(block, minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
              's1': _block_sum(block, yo, nb),
-             's2': _block_sum(block, yo[:, :, None] * yo[:, None, :], nb),
-             's4': _block_sum(block, yo ** 4, nb)}
-    parts['lag_n'], parts['lag_s'] = _lagged(rec.step[order], run_of, yo, block, nb)
+             's2': s2,
+             's4': _block_sum(block, np.square(np.square(y32)), nb)}
+    parts['lag_n'], parts['lag_s'] = _lagged(lay['lags'], y32, block, nb)
     integer = bool(np.all(x == np.round(x)))
     modes = _cell_modes(x, cell, len(labels)) if integer else np.full((len(labels), x.shape[1]),
                                                                       np.nan)
-    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float64), nb)
+    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float32), nb)
     residue = _residue_hits(xo, _modal_residues(x)) if integer \
         else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
-    block_of = np.full(len(rec), -1)
-    block_of[order] = block
-    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, block_of, nb)
-    stratum = np.zeros(nb, np.int64)
-    stratum[block] = cell[order]
+    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb)
     sums, layout = _pack(parts, nb)
-    return Blocks('stationary', channels, labels, stratum, sums, layout, {'integer': integer})
+    return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
+                  {'integer': integer})
 
 
 def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of: np.ndarray,
@@ -215,7 +245,8 @@ def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of
 
 
 def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray:
-    """Sums of ``values`` per block; ``block`` must be non-decreasing."""
+    """Sums of ``values`` per block (in their own precision), as doubles; ``block`` must be
+    non-decreasing."""
     out = np.zeros((blocks,) + values.shape[1:])
     if block.size:
         starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
@@ -223,21 +254,28 @@ def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray
     return out
 
 
-def _lagged(steps: np.ndarray, run: np.ndarray, y: np.ndarray, block: np.ndarray,
+def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list:
+    """Per lag, (hit, partner): samples with a partner ``lag`` steps later in their run."""
+    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps
+    sorter = np.argsort(key)
+    out = []
+    for lag in LAGS:
+        at = np.minimum(np.searchsorted(key, key + lag, sorter=sorter), key.size - 1)
+        partner = sorter[at]
+        hit = key[partner] == key + lag
+        out.append((hit, partner[hit]))
+    return out
+
+
+def _lagged(pairs: list, y: np.ndarray, block: np.ndarray,
             blocks: int) -> tuple[np.ndarray, np.ndarray]:
     """Products of residues ``lag`` steps apart in the same run, credited to the block of
     the first sample: (blocks, lags) counts and (blocks, lags, C) sums."""
-    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps
-    sorter = np.argsort(key)
     counts = np.zeros((blocks, len(LAGS)))
     sums = np.zeros((blocks, len(LAGS), y.shape[1]))
-    for li, lag in enumerate(LAGS):
-        at = np.searchsorted(key, key + lag, sorter=sorter)
-        at = np.minimum(at, key.size - 1)
-        partner = sorter[at]
-        hit = key[partner] == key + lag
+    for li, (hit, partner) in enumerate(pairs):
         counts[:, li] = np.bincount(block[hit], minlength=blocks)
-        sums[:, li] = _block_sum(block[hit], y[hit] * y[partner[hit]], blocks)
+        sums[:, li] = _block_sum(block[hit], y[hit] * y[partner], blocks)
     return counts, sums
 
 
@@ -252,91 +290,35 @@ def _cell_modes(x: np.ndarray, cell: np.ndarray, cells: int) -> np.ndarray:
     return counts.reshape(cells, channels, span).argmax(axis=2) + low
 
 
-def _modal_residues(x: np.ndarray) -> np.ndarray:
+def _residues(x: np.ndarray) -> np.ndarray:
+    """(N, C, len(MODULI)) int16 residues of integer readings modulo each step (a table
+    lookup: readings are small integers)."""
+    low = int(np.nanmin(x)) if x.size else 0
+    span = int(np.nanmax(x)) - low + 1 if x.size else 1
+    table = np.mod(np.arange(low, low + span)[:, None], np.array(MODULI)[None, :])
+    return table.astype(np.int16)[x.astype(np.int64) - low]
+
+
+def _modal_residues(x: np.ndarray, residues: np.ndarray | None = None) -> np.ndarray:
     """(C, len(MODULI)) the most common residue of each channel modulo each step."""
-    columns = np.arange(x.shape[1])
+    r = _residues(x) if residues is None else residues
     out = np.zeros((x.shape[1], len(MODULI)), np.int64)
+    columns = np.arange(x.shape[1])
     for j, q in enumerate(MODULI):
-        code = (np.mod(x, q).astype(np.int64) + q * columns).ravel()
+        code = (r[:, :, j].astype(np.int64) + q * columns).ravel()
         out[:, j] = np.bincount(code, minlength=q * x.shape[1]).reshape(-1, q).argmax(axis=1)
     return out
 
 
 def _residue_hits(x: np.ndarray, modal: np.ndarray) -> np.ndarray:
     """(N, C, len(MODULI)) 1 where a reading falls in its channel's modal residue class."""
-    return np.stack([np.mod(x, q) == modal[:, j] for j, q in enumerate(MODULI)],
-                    axis=2).astype(np.float64)
+    return (_residues(x) == modal[None]).astype(np.float32)
 
-
-# -- closed loop --------------------------------------------------------------------------
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
-    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front)."""
-    conditions = rec.conditions()
-    heading_known = bool(np.isfinite(rec.heading_deg).all())
-    rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
-                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading')}
-    stratum = []
-    for e in np.unique(rec.episode):
-        idx = np.flatnonzero(rec.episode == e)
-        idx = idx[np.argsort(rec.step[idx])]
-        r = rec.readings[idx][:, :8].astype(np.float64)
-        steps = rec.step[idx]
-        u = rec.direction[idx] * rec.power[idx]
-        phase = steps % perturb_every
-        factors = _factors(r, rec.power[idx])
-        onehot = (phase[:, None] == np.arange(perturb_every)[None, :]).astype(np.float64)
-        rows['n'].append([idx.size])
-        rows['level'].append(r.sum(axis=0))
-        rows['factor'].append(factors.T @ onehot)
-        rows['phase_n'].append(onehot.sum(axis=0))
-        rows['power'].append(rec.power[idx] @ onehot)
-        rows['right'].append([(rec.direction[idx] > 0).sum()])
-        xtx, xty, xty_sensor = _turn_moments(r, u, steps, perturb_every)
-        rows['xtx'].append(xtx)
-        rows['xty'].append(xty)
-        rows['xty_sensor'].append(xty_sensor)
-        rows['heading'].append(_heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
-                               if heading_known else np.zeros(2))
-        stratum.append(conditions.index(str(rec.condition[idx[0]])))
-    parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
-    sums, layout = _pack(parts, len(stratum))
-    return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
-                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
-
-
-def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """(T, 3) balance, intensity, turning per step, as in core.task.fitness_factors."""
-    left, right = r[:, 0:3].mean(axis=1), r[:, 3:6].mean(axis=1)
-    balance = 1.0 - np.abs(left - right) / 525.0
-    intensity = 1.0 - (r[:, 2] + r[:, 3]) / (2 * 525.0)
-    return np.stack([balance, intensity, (power != 0).astype(np.float64)], axis=1)
-
-
-def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every: int):
-    """Moments of the regression of the next change in readings on u(t) and u(t-1).
-
-    Transitions into a perturbation step are left out: the knock, not the command,
-    moves the heading there.
-    """
-    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
-    ok = [j for j in range(1, len(steps) - 1)
-          if steps[j + 1] == steps[j] + 1 and steps[j - 1] == steps[j] - 1
-          and steps[j + 1] % perturb_every != 0]
-    ok = np.asarray(ok, np.int64)
-    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1) if ok.size else np.zeros((0, 3))
-    dy = imbalance[ok + 1] - imbalance[ok] if ok.size else np.zeros(0)
-    dr = r[ok + 1] - r[ok] if ok.size else np.zeros((0, 8))
-    return x.T @ x, x.T @ dy, x.T @ dr
-
-
-def _heading_moments(heading: np.ndarray, u: np.ndarray, steps: np.ndarray,
-                     perturb_every: int) -> np.ndarray:
-    """(sum u^2, sum u * dh) over consecutive unperturbed steps: turn per unit of command."""
-    ok = np.flatnonzero(np.diff(steps) == 1)
-    dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
-    keep = (steps[ok + 1] % perturb_every) != 0
-    return np.array([(u[ok][keep] ** 2).sum(), (u[ok][keep] * dh[keep]).sum()])
+    """Per-episode sums of closed-loop Khepera data (``gap.closedloop``)."""
+    from .closedloop import closed_loop_blocks as blocks
+    return blocks(rec, perturb_every)
 
 
 # -- resampling ---------------------------------------------------------------------------
@@ -370,7 +352,8 @@ def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stat
     with np.errstate(invalid='ignore', divide='ignore'):
         if blocks.kind == 'stationary':
             return _stationary_stats(blocks, sums)
-        return _closed_loop_stats(blocks, sums)
+        from .closedloop import closed_loop_stats
+        return closed_loop_stats(blocks, sums)
 
 
 def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
@@ -445,50 +428,3 @@ def _slopes(level: np.ndarray, sd: np.ndarray) -> np.ndarray:
     dl = level - level.mean(axis=1, keepdims=True)
     ds = sd - sd.mean(axis=1, keepdims=True)
     return (dl * ds).sum(axis=1) / (dl * dl).sum(axis=1)
-
-
-def _closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
-    keys, cols = [], []
-    n = b.part(sums, 'n')[..., 0]
-    phases = b.extra['perturb_every']
-    for s, c in enumerate(b.strata):
-        level = b.part(sums, 'level')[:, s] / n[:, s, None]
-        for k in range(8):
-            keys.append(Key('closed_loop_level', (k,), c, None))
-            cols.append(level[:, k])
-        factor = b.part(sums, 'factor')[:, s]                    # (R, 3, P)
-        count = b.part(sums, 'phase_n')[:, s]                    # (R, P)
-        power = b.part(sums, 'power')[:, s] / count
-        for p in range(phases):
-            part = f'step {p} after perturbation'
-            for f, name in enumerate(FACTORS):
-                keys.append(Key(f'fitness_{name}', (0, 1, 2, 3, 4, 5), c, part))
-                cols.append(factor[:, f, p] / count[:, p])
-            keys.append(Key('turn_power', (), c, part))
-            cols.append(power[:, p])
-        keys.append(Key('turn_right_fraction', (), c, None))
-        cols.append(b.part(sums, 'right')[:, s, 0] / n[:, s])
-        xtx, xty = b.part(sums, 'xtx')[:, s], b.part(sums, 'xty')[:, s]
-        beta = _solve(xtx, xty[..., None])[..., 0]               # (R, 3)
-        for j, lag in enumerate(('lag 0', 'lag 1')):
-            keys.append(Key('turn_response', (0, 1, 2, 3, 4, 5), c, lag))
-            cols.append(beta[:, j])
-        beta_s = _solve(xtx, b.part(sums, 'xty_sensor')[:, s])   # (R, 3, 8)
-        for k in range(8):
-            for j, lag in enumerate(('lag 0', 'lag 1')):
-                keys.append(Key('sensor_turn_response', (k,), c, lag))
-                cols.append(beta_s[:, j, k])
-        if b.extra['heading']:
-            h = b.part(sums, 'heading')[:, s]
-            keys.append(Key('turn_size', (), c, 'deg per unit of command'))
-            cols.append(h[:, 1] / h[:, 0])
-    return Stats(keys, np.stack(cols, axis=1))
-
-
-def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Batched least squares that tolerates singular moment matrices (NaN there)."""
-    out = np.full(b.shape, np.nan)
-    ok = np.abs(np.linalg.det(a)) > 1e-9
-    if ok.any():
-        out[ok] = np.linalg.solve(a[ok], b[ok])
-    return out

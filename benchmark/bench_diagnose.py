@@ -1,0 +1,85 @@
+"""How long the gap diagnosis takes (prints figures; not a test).
+
+    python benchmark/bench_diagnose.py [--repeat 1] [--skip-long]
+
+Two recordings from the emulated robot with its default effects
+(``EffectsConfig.real_robot()``), both stationary, as ``benchmark/blind_gap.py``
+records them:
+  default   the blind benchmark's protocol, 60 samples per heading and condition
+  long      about 36,000 samples x 8 sensors (one hour at 10 Hz)
+Each is diagnosed in this process on one core (OMP/BLAS threads set to 1); the
+wall and CPU time of ``gap.diagnose.diagnose`` are printed, and the compound set
+found.  On a machine shared with other jobs the wall figures are pessimistic; the
+CPU time of this single-threaded process is the closer measure of one core's work.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(var, '1')
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from blind_gap import REPEATS, SAMPLES, STATIONARY, record_stationary, robot  # noqa: E402
+
+from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
+from khepera_noise_ros.gap import diagnose  # noqa: E402
+from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
+
+LONG_SAMPLES = 36_000
+
+
+def recording(samples: int, seed: int = 0):
+    world = robot(EffectsConfig.real_robot(), seed)
+    return record_stationary(world, STATIONARY, samples=samples, repeats=REPEATS)
+
+
+def timed(rec, seed: int = 0) -> tuple[float, diagnose.Diagnosis]:
+    """The simulator is the paper's independent model at the robot's own sensor noise,
+    so the gap is the robot's effects."""
+    noise = EffectsConfig.real_robot().sensor_noise
+    options = diagnose.Options(config=SimConfig(noise=NoiseModel.independent_only(noise)),
+                               seed=seed)
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = diagnose.diagnose([rec], options)
+    timed.cpu = time.process_time() - c0
+    return time.perf_counter() - t0, result
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--repeat', type=int, default=1)
+    p.add_argument('--skip-long', action='store_true')
+    args = p.parse_args(argv)
+    headings = sum(len(h) for h in STATIONARY.values())
+    cases = [('default', SAMPLES)]
+    if not args.skip_long:
+        cases.append(('long', math.ceil(LONG_SAMPLES / (headings * REPEATS))))
+    print('timings on a shared machine: pessimistic')
+    for label, per_heading in cases:
+        rec = recording(per_heading)
+        times, cpu = [], []
+        for k in range(args.repeat):
+            seconds, result = timed(rec, k)
+            times.append(seconds)
+            cpu.append(timed.cpu)
+        summary = result.to_json().get('compound') or {}
+        chosen = [f"{c['name']} {c['cumulative_reduction']:.2f}"
+                  for c in summary.get('chosen', [])]
+        shrink = summary.get('heldout_reduction')
+        print(f'{label:8s} {len(rec):6d} samples x {rec.channels} sensors: diagnose '
+              f'{min(times):6.2f} s wall, {min(cpu):6.2f} s CPU (best of {len(times)}); '
+              f'top {result.top_effect}; '
+              f'compound {chosen} shrink '
+              f'{"n/a" if shrink is None else f"{shrink:.2f}"}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

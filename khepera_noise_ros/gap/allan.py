@@ -1,0 +1,119 @@
+"""Allan deviation of the residuals: fast (white) noise against slow change, per sensor and
+for the component all sensors share.
+
+The overlapping Allan deviation at averaging time tau = m samples (the tool of
+IMU noise identification) falls as tau^-1/2 for white noise, stays flat for
+flicker noise, grows as tau^+1/2 for a random walk and as tau^+1 for a drift
+(a ramp).  A slow change shared by many sensors (room light, temperature, the
+supply) shows as the shared component's deviation at long tau standing above
+the simulator's; fast noise shared in groups shows at short tau only.
+
+Residuals are readings about each run's mean (a run: one episode at one heading
+and condition), so the light model's levels do not count; each run is a
+separate stretch, and the sums of squares are pooled over runs.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..recording import Recording
+from . import replay
+
+SLOPES = {'white': -0.5, 'flicker': 0.0, 'random_walk': 0.5, 'drift': 1.0}
+
+
+def oadev(y: np.ndarray, m: int, rate: float = 1.0) -> tuple[float, int]:
+    """(overlapping Allan deviation of rate data ``y`` at averaging factor ``m``, number of
+    terms); NaN with 0 terms when the series is shorter than 2m + 1 samples.
+
+    Phase x = cumsum(y) / rate (with a leading 0); sigma^2(m tau0) =
+    sum (x[i+2m] - 2 x[i+m] + x[i])^2 / (2 (m tau0)^2 (N + 1 - 2m)).
+    """
+    sq, terms = _sum_squares(np.asarray(y, np.float64), m)
+    if terms == 0:
+        return float('nan'), 0
+    tau = m / rate
+    return float(np.sqrt(sq / rate ** 2 / (2.0 * tau * tau * terms))), terms
+
+
+def _sum_squares(y: np.ndarray, m: int) -> tuple[float, int]:
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    terms = x.size - 2 * m
+    if terms <= 0:
+        return 0.0, 0
+    d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
+    return float(d @ d), int(terms)
+
+
+def taus(longest: int) -> list[int]:
+    """Averaging factors 1, 2, 4, ... up to a third of the longest run."""
+    out, m = [], 1
+    while 2 * m + 1 <= max(3, longest) and m <= max(1, longest // 3):
+        out.append(m)
+        m *= 2
+    return out
+
+
+def profile(rec: Recording, factors=None) -> dict:
+    """{'taus': [...], 'sensors': {s: [adev per tau]}, 'shared': [adev per tau]} of the
+    recording's run residuals, pooled over runs (stationary recordings only)."""
+    used = list(rec.channels_used)
+    runs = [r for r in replay.runs(rec) if r.size >= 3]
+    longest = max((r.size for r in runs), default=0)
+    factors = list(factors) if factors is not None else taus(longest)
+    sums = np.zeros((len(factors), len(used) + 1))
+    terms = np.zeros(len(factors))
+    for r in runs:
+        y = rec.readings[r][:, used].astype(np.float64)
+        y = y - y.mean(axis=0)
+        cols = np.concatenate([y, y.mean(axis=1, keepdims=True)], axis=1)
+        for i, m in enumerate(factors):
+            if r.size < 2 * m + 1:
+                continue
+            x = np.vstack([np.zeros((1, cols.shape[1])), np.cumsum(cols, axis=0)])
+            d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
+            sums[i] += (d * d).sum(axis=0)
+            terms[i] += d.shape[0]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        adev = np.sqrt(sums / (2.0 * np.square(factors)[:, None] * terms[:, None]))
+    return {'taus': factors, 'terms': terms.tolist(),
+            'sensors': {int(s): adev[:, k].tolist() for k, s in enumerate(used)},
+            'shared': adev[:, -1].tolist()}
+
+
+def slope(taus_: list, adev: list) -> float:
+    """Log-log slope of the deviation over its last three averaging times."""
+    t, a = np.log(np.asarray(taus_, float)), np.log(np.asarray(adev, float))
+    ok = np.isfinite(a)
+    t, a = t[ok][-3:], a[ok][-3:]
+    if t.size < 2:
+        return float('nan')
+    return float(np.polyfit(t, a, 1)[0])
+
+
+def term(value: float) -> str:
+    """The noise term whose slope is nearest ``value``."""
+    if not np.isfinite(value):
+        return 'unknown'
+    return min(SLOPES, key=lambda k: abs(SLOPES[k] - value))
+
+
+def compare(real: dict, sim: dict) -> dict:
+    """Real against simulated profiles: per sensor and shared, the ratio of deviations at
+    the shortest and longest averaging time and the long-tau slope's noise term."""
+    out = {'taus': real['taus'], 'real': real, 'simulated': sim, 'sensors': {}}
+    for key in list(real['sensors']) + ['shared']:
+        r = real['shared'] if key == 'shared' else real['sensors'][key]
+        s = sim['shared'] if key == 'shared' else sim['sensors'].get(key)
+        if s is None or not r:
+            continue
+        ratio = [float(a / b) if b and np.isfinite(a) and np.isfinite(b) and b > 0 else None
+                 for a, b in zip(r, s)]
+        row = {'short_ratio': ratio[0], 'long_ratio': ratio[-1],
+               'real_term': term(slope(real['taus'], r)),
+               'simulated_term': term(slope(real['taus'], s))}
+        if key == 'shared':
+            out['shared'] = row
+        else:
+            out['sensors'][key] = row
+    return out

@@ -1,0 +1,127 @@
+"""Closed-loop statistics of the gap diagnosis: per-episode sums and the statistics built on
+them (fitness factors by step after a perturbation, turn power and direction, the
+regression of reading changes on the turn command, turn size where headings are
+known).  Blocks are whole episodes; see ``gap.statistics`` for the resampling.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..recording import Recording
+from .statistics import FACTORS, Blocks, Key, Stats, _pack
+
+
+def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
+    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front)."""
+    conditions = rec.conditions()
+    heading_known = bool(np.isfinite(rec.heading_deg).all())
+    rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
+                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading')}
+    stratum = []
+    for e in np.unique(rec.episode):
+        idx = np.flatnonzero(rec.episode == e)
+        idx = idx[np.argsort(rec.step[idx])]
+        r = rec.readings[idx][:, :8].astype(np.float64)
+        steps = rec.step[idx]
+        u = rec.direction[idx] * rec.power[idx]
+        phase = steps % perturb_every
+        factors = _factors(r, rec.power[idx])
+        onehot = (phase[:, None] == np.arange(perturb_every)[None, :]).astype(np.float64)
+        rows['n'].append([idx.size])
+        rows['level'].append(r.sum(axis=0))
+        rows['factor'].append(factors.T @ onehot)
+        rows['phase_n'].append(onehot.sum(axis=0))
+        rows['power'].append(rec.power[idx] @ onehot)
+        rows['right'].append([(rec.direction[idx] > 0).sum()])
+        xtx, xty, xty_sensor = _turn_moments(r, u, steps, perturb_every)
+        rows['xtx'].append(xtx)
+        rows['xty'].append(xty)
+        rows['xty_sensor'].append(xty_sensor)
+        rows['heading'].append(_heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
+                               if heading_known else np.zeros(2))
+        stratum.append(conditions.index(str(rec.condition[idx[0]])))
+    parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
+    sums, layout = _pack(parts, len(stratum))
+    return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
+                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
+
+
+def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """(T, 3) balance, intensity, turning per step, as in core.task.fitness_factors."""
+    left, right = r[:, 0:3].mean(axis=1), r[:, 3:6].mean(axis=1)
+    balance = 1.0 - np.abs(left - right) / 525.0
+    intensity = 1.0 - (r[:, 2] + r[:, 3]) / (2 * 525.0)
+    return np.stack([balance, intensity, (power != 0).astype(np.float64)], axis=1)
+
+
+def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every: int):
+    """Moments of the regression of the next change in readings on u(t) and u(t-1).
+
+    Transitions into a perturbation step are left out: the knock, not the command,
+    moves the heading there.
+    """
+    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
+    ok = [j for j in range(1, len(steps) - 1)
+          if steps[j + 1] == steps[j] + 1 and steps[j - 1] == steps[j] - 1
+          and steps[j + 1] % perturb_every != 0]
+    ok = np.asarray(ok, np.int64)
+    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1) if ok.size else np.zeros((0, 3))
+    dy = imbalance[ok + 1] - imbalance[ok] if ok.size else np.zeros(0)
+    dr = r[ok + 1] - r[ok] if ok.size else np.zeros((0, 8))
+    return x.T @ x, x.T @ dy, x.T @ dr
+
+
+def _heading_moments(heading: np.ndarray, u: np.ndarray, steps: np.ndarray,
+                     perturb_every: int) -> np.ndarray:
+    """(sum u^2, sum u * dh) over consecutive unperturbed steps: turn per unit of command."""
+    ok = np.flatnonzero(np.diff(steps) == 1)
+    dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
+    keep = (steps[ok + 1] % perturb_every) != 0
+    return np.array([(u[ok][keep] ** 2).sum(), (u[ok][keep] * dh[keep]).sum()])
+
+
+def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
+    keys, cols = [], []
+    n = b.part(sums, 'n')[..., 0]
+    phases = b.extra['perturb_every']
+    for s, c in enumerate(b.strata):
+        level = b.part(sums, 'level')[:, s] / n[:, s, None]
+        for k in range(8):
+            keys.append(Key('closed_loop_level', (k,), c, None))
+            cols.append(level[:, k])
+        factor = b.part(sums, 'factor')[:, s]                    # (R, 3, P)
+        count = b.part(sums, 'phase_n')[:, s]                    # (R, P)
+        power = b.part(sums, 'power')[:, s] / count
+        for p in range(phases):
+            part = f'step {p} after perturbation'
+            for f, name in enumerate(FACTORS):
+                keys.append(Key(f'fitness_{name}', (0, 1, 2, 3, 4, 5), c, part))
+                cols.append(factor[:, f, p] / count[:, p])
+            keys.append(Key('turn_power', (), c, part))
+            cols.append(power[:, p])
+        keys.append(Key('turn_right_fraction', (), c, None))
+        cols.append(b.part(sums, 'right')[:, s, 0] / n[:, s])
+        xtx, xty = b.part(sums, 'xtx')[:, s], b.part(sums, 'xty')[:, s]
+        beta = _solve(xtx, xty[..., None])[..., 0]               # (R, 3)
+        for j, lag in enumerate(('lag 0', 'lag 1')):
+            keys.append(Key('turn_response', (0, 1, 2, 3, 4, 5), c, lag))
+            cols.append(beta[:, j])
+        beta_s = _solve(xtx, b.part(sums, 'xty_sensor')[:, s])   # (R, 3, 8)
+        for k in range(8):
+            for j, lag in enumerate(('lag 0', 'lag 1')):
+                keys.append(Key('sensor_turn_response', (k,), c, lag))
+                cols.append(beta_s[:, j, k])
+        if b.extra['heading']:
+            h = b.part(sums, 'heading')[:, s]
+            keys.append(Key('turn_size', (), c, 'deg per unit of command'))
+            cols.append(h[:, 1] / h[:, 0])
+    return Stats(keys, np.stack(cols, axis=1))
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched least squares that tolerates singular moment matrices (NaN there)."""
+    out = np.full(b.shape, np.nan)
+    ok = np.abs(np.linalg.det(a)) > 1e-9
+    if ok.any():
+        out[ok] = np.linalg.solve(a[ok], b[ok])
+    return out
