@@ -129,4 +129,3 @@ def closed_loop(seed: int, effects, episodes: int, rng, steps: int = 60) -> Reco
         heading_deg=np.array(cols['heading']), condition=np.full(t, 'task'),
         readings=np.array(cols['readings']), direction=np.array(cols['direction'], float),
         power=np.array(cols['power'], float), manifest=manifest)
-
