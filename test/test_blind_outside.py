@@ -136,6 +136,10 @@ def test_scoring_rules():
     assert s['predicted_from'] == 'threshold'
     assert s['predicted'] == ['temporal_drift', 'sensor_gain_offset']
     assert (s['precision'], s['recall']) == (0.5, 0.5)
+    alone = dict(by_threshold, combined=None)
+    s = score_case(compound, alone)
+    assert s['predicted_from'] == 'top_effect'
+    assert (s['predicted'], s['shrink']) == (['temporal_drift'], 0.5)
     by_set = dict(by_threshold, compound=[{'name': 'temporal_drift', 'cumulative_reduction': 0.4},
                                           {'name': 'sensor_latency',
                                            'cumulative_reduction': 0.9}])

@@ -4,11 +4,12 @@
 - location: among right answers whose effect lives on sensors, right when the
   named sensors overlap the injected ones with Jaccard >= 0.5 (no sensors
   named counts as all eight).
-- compound case: the predicted set is the diagnosis's selected set (a list
-  under ``compound``/``selected``, or ``combined``'s effect names); when the
-  file has none, every effect with held-out reduction >= SHRINK_MIN (and
-  p <= P_MAX where a p-value is given).  Precision and recall of that set
-  against the injected names.
+- compound case: the predicted set is the diagnosis's selected set: a list
+  under ``compound``/``selected``, else ``combined``'s effect names, else,
+  when ``combined`` is there but empty (null), the top effect alone; a file
+  with none of these keys gets every effect with held-out reduction >=
+  SHRINK_MIN (and p <= P_MAX where a p-value is given).  Precision and
+  recall of that set against the injected names.
 - shrink: single cases, the top effect's held-out reduction; compound cases,
   the selected set's cumulative reduction (``combined``'s when that is all
   there is, else the best single effect's).
@@ -52,6 +53,11 @@ def selected(diag: dict) -> tuple[list[str], str, float | None]:
             names = _names(combined.get(inner))
             if names is not None:
                 return [n for n in names if n != 'none'], 'combined', _shrink_of(combined)
+    if 'combined' in diag and not combined:
+        top = diag.get('top_effect')
+        entry = next((e for e in diag.get('effects', []) if e.get('name') == top), {})
+        return ([top] if top and top != 'none' else []), 'top_effect', \
+            (entry.get('heldout_reduction') or 0.0) if top != 'none' else 0.0
     names = [e['name'] for e in diag.get('effects', [])
              if e.get('name') != 'none' and (e.get('heldout_reduction') or 0) >= SHRINK_MIN
              and (e.get('p_value') is None or e['p_value'] <= P_MAX)]
