@@ -46,6 +46,7 @@ def test_cases_are_deterministic_for_a_seed_and_cover_the_vocabulary():
     assert set(singles) == set(NAMES)
     compounds = [c for c in cases if c['kind'] == 'compound']
     assert all(2 <= len(c['effects']) <= 4 for c in compounds)
+    assert [c['protocol'] for c in compounds] == ['stationary', 'closed_loop'] * 3
     assert all(len({e.name for e in c['effects']}) == len(c['effects']) for c in compounds)
     for c in cases:
         closed = any(e.name in ('sensor_latency', 'actuator_turn_error') for e in c['effects'])

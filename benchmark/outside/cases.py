@@ -1,7 +1,9 @@
 """Drawing cases: which effects, in which shapes, where and how strong.
 
 Single-effect cases cycle through the vocabulary so every name gets its share;
-compound cases take 2-4 different names at once.  A case whose effects need
+compound cases take 2-4 different names at once, alternately from the sensor
+effects only (a stationary recording) and with latency or turn error among them
+(closed loop).  A case whose effects need
 turn commands (latency, turn error) is recorded in closed loop, any other as
 a stationary recording.  Everything comes from one ``numpy`` generator, so a
 seed gives the same cases.
@@ -135,8 +137,16 @@ def draw_cases(seed: int, singles: int, compounds: int, controls: int) -> list[d
     for i in range(singles):
         name = NAMES[i % len(NAMES)]
         cases.append(_case(len(cases), 'single', [name], rng))
-    for _ in range(compounds):
-        names = rng.choice(NAMES, int(rng.integers(2, 5)), replace=False).tolist()
+    sensing = [n for n in NAMES if n not in CLOSED_LOOP_ONLY]
+    for j in range(compounds):
+        # half stationary (sensor effects only), half closed loop (with latency or turn error)
+        k = int(rng.integers(2, 5))
+        if j % 2 == 0:
+            names = rng.choice(sensing, k, replace=False).tolist()
+        else:
+            first = [str(rng.choice(CLOSED_LOOP_ONLY))]
+            rest = [n for n in NAMES if n not in first]
+            names = first + rng.choice(rest, k - 1, replace=False).tolist()
         cases.append(_case(len(cases), 'compound', names, rng))
     for _ in range(controls):
         cases.append(_case(len(cases), 'control', [], rng))
