@@ -69,8 +69,10 @@ def diagnose(command: list[str], recording: Path, out: Path, seed: int, replicat
         return None, f'timeout after {timeout:.0f} s', time.perf_counter() - start
     took = time.perf_counter() - start
     if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ['(no output)'])[-1]
-        return None, f'exit {proc.returncode}: {tail}', took
+        lines = proc.stderr.strip().splitlines() or ['(no output)']
+        frames = [ln.strip() for ln in lines if ln.strip().startswith('File ')]
+        where = f' (at {frames[-1]})' if frames else ''
+        return None, f'exit {proc.returncode}: {lines[-1]}{where}', took
     return json.loads((out / 'diagnosis.json').read_text()), '', took
 
 
