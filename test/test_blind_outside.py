@@ -146,3 +146,13 @@ def test_scoring_rules():
                                            'cumulative_reduction': 0.9}])
     s = score_case(compound, by_set)
     assert (s['precision'], s['recall'], s['shrink']) == (1.0, 1.0, 0.9)
+
+
+def test_a_case_gives_the_same_recording_for_its_seed(tmp_path):
+    import blind_outside
+    case = draw_cases(2, 7, 2, 0)[-1]           # a closed-loop compound
+    assert case['protocol'] == 'closed_loop'
+    a = blind_outside.make_recording(case, True, tmp_path / 'a')
+    case = draw_cases(2, 7, 2, 0)[-1]           # fresh effects: no state carried over
+    b = blind_outside.make_recording(case, True, tmp_path / 'b')
+    assert a.with_suffix('.csv').read_text() == b.with_suffix('.csv').read_text()
