@@ -41,6 +41,8 @@ from khepera_noise_ros.gap.effects import VOCABULARY  # noqa: E402
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
 from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
+from khepera_noise_ros.reality.effects.config import SENSOR_DRAWS  # noqa: E402
+from khepera_noise_ros.reality.effects.processes import SensorNoise  # noqa: E402
 from khepera_noise_ros.reality.world import CONDITIONS, EmulatedWorld  # noqa: E402
 from khepera_noise_ros.recording import FORMAT, Recording  # noqa: E402
 
@@ -57,18 +59,18 @@ RING = (0, 1, 2, 3, 4, 5, 6, 7)          # sensors in order around the body: adj
 
 # --- the robot ----------------------------------------------------------------------
 
-class PaperSensorNoise(emu.SensorNoise):
+class PaperSensorNoise(SensorNoise):
     """Sensor noise with getnoise's truncation toward zero, as the paper's C code does."""
 
     def apply(self, level, z, rows):
         from scipy.special import ndtr
-        u = ndtr(z[:, emu.SENSOR_DRAWS])
+        u = ndtr(z[:, SENSOR_DRAWS])
         return level + np.trunc((2.0 * u - 1.0) * self.level * level)
 
 
 def _truncates() -> bool:
-    probe = emu.SensorNoise(0.02).apply(np.full((1, 8), 50.3), np.full((1, emu.DRAWS), 0.8),
-                                        np.array([0]))
+    probe = SensorNoise(0.02).apply(np.full((1, 8), 50.3), np.full((1, emu.DRAWS), 0.8),
+                                    np.array([0]))
     return bool(np.allclose(probe - 50.3, np.round(probe - 50.3)))
 
 
@@ -84,7 +86,7 @@ def robot(config: emu.EffectsConfig, seed: int, robots: int = 1) -> EmulatedWorl
     if not _truncates():
         chain = world._chain.chain          # the emulator has no setting for this
         for i, process in enumerate(chain):
-            if type(process) is emu.SensorNoise:
+            if type(process) is SensorNoise:
                 chain[i] = PaperSensorNoise(process.level)
     return world
 

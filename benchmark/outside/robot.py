@@ -53,7 +53,7 @@ def stationary_clean(seed: int, headings, samples: int) -> Recording:
             readings = env.reset(seed + episode, robots=1, bearing_deg=heading)
             step = 0
             while readings is not None:
-                rows.append(readings[:, 0].astype(float))
+                rows.append(readings[0].astype(float))
                 meta.append((episode, step, heading, label))
                 readings = env.step(np.array([1]), np.array([0]))
                 step += 1
@@ -100,7 +100,7 @@ def closed_loop(seed: int, effects, episodes: int, rng, steps: int = 60) -> Reco
         late: deque = deque(maxlen=delay + 1)
         step = 0
         while readings is not None:
-            row = readings[:, 0].astype(float)
+            row = readings[0].astype(float)
             for e in effects:
                 row = e.sense(t, row, rng)
             late.append(_finish(row))

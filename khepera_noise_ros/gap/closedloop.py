@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
-from .statistics import FACTORS, Blocks, Key, Stats, _pack
+from .blocks import FACTORS, Blocks, Key, Stats, pack as _pack
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
