@@ -22,7 +22,7 @@ setup(
         'wheels': ['ros-rclpy[fastrtps]', 'ros-std-msgs', 'ros-sensor-msgs'],
         # rosbag2 (MCAP) recordings without the ROS C++ stack.
         'bags': ['rosbags'],
-        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8'],
+        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'hypothesis'],
     },
     zip_safe=True,
     maintainer='khepera_noise_ros maintainers',

@@ -13,7 +13,7 @@ import os
 import pkgutil
 import sys
 
-from . import __version__, commands
+from . import __version__, commands, files, lifeline
 
 
 class UsageError(Exception):
@@ -58,12 +58,19 @@ def _unavailable(name: str, exc: ImportError):
 
 def main(argv=None) -> int:
     loopback_only()
+    lifeline.from_environment()
     args = build_parser().parse_args(argv)
     try:
-        return int(args.run(args) or 0)
+        with lifeline.terminate_as_interrupt():     # kill (SIGTERM) saves what Ctrl-C saves
+            return int(args.run(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f'khepera-noise {args.command}: error: {exc}', file=sys.stderr)
         return 2
+    except OSError as exc:
+        if not files.refused(exc):
+            raise
+        print(f'khepera-noise {args.command}: error: {files.describe(exc)}', file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f'khepera-noise {args.command}: interrupted', file=sys.stderr)
         return 130

@@ -30,6 +30,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.utilities import remove_ros_args
 
+from .. import lifeline
 from . import spin_forever
 from .controller import Controller
 from .graph import events_executor, spinning
@@ -52,6 +53,7 @@ def robot_class(argv: list[str]):
 def main(args=None) -> int:
     argv = sys.argv if args is None else args
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')   # unless asked
+    lifeline.from_environment()         # started by a parent that may die: end with it
     nodes = []
     try:
         robot = robot_class(argv)
