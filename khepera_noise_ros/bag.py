@@ -18,12 +18,12 @@ reads the same.  ``rosbags`` is imported lazily: only bag users need it.
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from .files import replace_tree, staging_path
 from .recording import (Recording, RecordingError, check_manifest, check_sequence,
                         dump_manifest, finish_manifest, first_bad_row)
 
@@ -59,9 +59,9 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
         if not (overwrite and (path / 'metadata.yaml').is_file()):
             raise FileExistsError(f'{path} exists; choose another name'
                                   + ('' if overwrite else ' or allow overwriting'))
-        shutil.rmtree(path)
     period_ns = manifest['sample_period_s'] * 1e9
-    writer = rosbag2.Writer(path, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP)
+    staged = staging_path(path)         # the old bag stays until the new one is complete
+    writer = rosbag2.Writer(staged, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP)
     with writer:
         conn = {t: writer.add_connection(_topic(namespace, t), TYPES[t], typestore=store,
                                          offered_qos_profiles=[_qos(t)])
@@ -87,7 +87,7 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
             if not math.isnan(rec.direction[i]):
                 put(CMD_TURN, stamp, _multiarray(store, CMD_TURN, key,
                                                  [rec.direction[i], rec.power[i]]))
-    return path
+    return replace_tree(staged, path)
 
 
 def _qos(topic: str):
@@ -140,7 +140,8 @@ def read_bag(path) -> Recording:
     except (rosbag2.ReaderError, AssertionError, KeyError, IndexError, ValueError) as exc:
         if isinstance(exc, RecordingError):
             raise
-        raise RecordingError(f'{path}: not a readable rosbag2 recording: {exc}') from None
+        raise RecordingError(f'{path}: not a readable rosbag2 recording: '
+                             f'{" ".join(str(exc).split())}') from None
     return parsed.recording()
 
 

@@ -59,18 +59,27 @@ def _unavailable(name: str, exc: ImportError):
 def main(argv=None) -> int:
     loopback_only()
     lifeline.from_environment()
-    args = build_parser().parse_args(argv)
+    with lifeline.terminate_as_interrupt():         # kill (SIGTERM) saves what Ctrl-C saves
+        try:
+            args = build_parser().parse_args(argv)
+        except KeyboardInterrupt:                   # stopped while loading the commands
+            return 130
+        status = _run(args)
+    if status == 130 and argv is None:
+        # stopped, and this process is the command: what it saves is written and closed,
+        # so skip the interpreter's and DDS's teardown (seconds on a busy machine)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
+def _run(args) -> int:
     try:
-        with lifeline.terminate_as_interrupt():     # kill (SIGTERM) saves what Ctrl-C saves
-            return int(args.run(args) or 0)
+        return int(args.run(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f'khepera-noise {args.command}: error: {exc}', file=sys.stderr)
         return 2
-    except OSError as exc:
-        if not files.refused(exc):
-            raise
-        print(f'khepera-noise {args.command}: error: {files.describe(exc)}', file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print(f'khepera-noise {args.command}: interrupted', file=sys.stderr)
         return 130
@@ -78,6 +87,11 @@ def main(argv=None) -> int:
         # `khepera-noise ... | head`: the reader left; stop quietly like other CLI tools
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        if not files.refused(exc):
+            raise
+        print(f'khepera-noise {args.command}: error: {files.describe(exc)}', file=sys.stderr)
+        return 1
 
 
 if __name__ == '__main__':

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .files import atomic_open, atomic_write_text
+
 FORMAT = 'khepera-noise-recording/1'
 KHEPERA_CHANNELS = 8
 COLUMNS = ('episode', 'step', 'heading_deg', 'condition') + tuple(f's{i}' for i in range(8)) \
@@ -280,14 +282,14 @@ def write_csv(rec: Recording, path) -> tuple[Path, Path]:
     csv_path, yaml_path = paths(path)
     manifest = finish_manifest(rec)
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, 'w', newline='') as f:
+    with atomic_open(csv_path, newline='') as f:      # the old file stays until complete
         writer = csv.writer(f, lineterminator='\n')
         writer.writerow(columns(rec.channels))
         for i in range(len(rec)):
             writer.writerow([int(rec.episode[i]), int(rec.step[i]), _cell(rec.heading_deg[i]),
                              str(rec.condition[i])] + [_cell(v) for v in rec.readings[i]]
                             + [_cell(rec.direction[i]), _cell(rec.power[i])])
-    yaml_path.write_text(dump_manifest(manifest))
+    atomic_write_text(yaml_path, dump_manifest(manifest))
     return csv_path, yaml_path
 
 
@@ -326,7 +328,7 @@ def read_manifest(path) -> dict:
         line = f' line {mark.line + 1}' if mark is not None else ''
         raise RecordingError(f'{path}{line}: not valid YAML: {exc.problem}') from None
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise RecordingError(f'{path}: not valid YAML: {exc}') from None
+        raise RecordingError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
     return manifest
 
 

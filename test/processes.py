@@ -22,6 +22,26 @@ def start_time(pid: int) -> int | None:
     return None if fields[0] in ('Z', 'X') else int(fields[19])
 
 
+def cpu_seconds(pid: int) -> float:
+    """CPU time the process has used so far (0 once it is gone)."""
+    try:
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def opened(pid: int, name: str) -> bool:
+    """Does the process hold a descriptor on ``name`` (say /dev/ptmx)?"""
+    for fd in Path(f'/proc/{pid}/fd').glob('*'):
+        try:
+            if os.readlink(fd) == name:
+                return True
+        except OSError:
+            pass
+    return False
+
+
 def children(pid: int) -> list[int]:
     found = []
     for task in Path(f'/proc/{pid}/task').glob('*'):

@@ -135,7 +135,7 @@ def read_yaml(path) -> dict:
         try:
             loaded = yaml.safe_load(f)
         except yaml.YAMLError as exc:
-            raise ValueError(f'{path} is not valid YAML: {exc}') from None
+            raise ValueError(f'{path} is not valid YAML: {" ".join(str(exc).split())}') from None
     loaded = loaded or {}
     if not isinstance(loaded, dict):
         raise ValueError(f'{path} must hold a mapping of settings, got {type(loaded).__name__}')

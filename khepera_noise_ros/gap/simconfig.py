@@ -99,7 +99,7 @@ def load(path=None) -> SimConfig:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise ValueError(f'{path}: not valid YAML: {exc}') from None
+        raise ValueError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
     return from_parameters(_node_parameters(data, path), str(path))
 
 

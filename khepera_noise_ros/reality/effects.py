@@ -242,7 +242,7 @@ class EffectsConfig:
             try:
                 data = yaml.safe_load(f)
             except yaml.YAMLError as exc:
-                raise ValueError(f'{path}: not valid YAML: {exc}') from None
+                raise ValueError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
         return cls.from_dict(data if data is not None else {}, str(path))
 
     def save(self, path) -> Path:
