@@ -18,6 +18,7 @@ reads the same.  ``rosbags`` is imported lazily: only bag users need it.
 from __future__ import annotations
 
 import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +129,7 @@ def _multiarray(store, topic: str, key: tuple[int, int], values):
 def read_bag(path) -> Recording:
     """Read a rosbag2 directory written by ``write_bag`` (or recorded from the topics)."""
     rosbag2, store = _rosbags()
+    from rosbags.serde import SerdeError
     path = Path(path)
     if not (path / 'metadata.yaml').is_file():
         raise FileNotFoundError(f'{path}: not a rosbag2 directory (no metadata.yaml)')
@@ -137,7 +139,8 @@ def read_bag(path) -> Recording:
             parsed = _Parsed(path, topics)
             for connection, _, raw in reader.messages(list(topics.values())):
                 parsed.add(connection, store.deserialize_cdr(raw, connection.msgtype))
-    except (rosbag2.ReaderError, AssertionError, KeyError, IndexError, ValueError) as exc:
+    except (rosbag2.ReaderError, SerdeError, struct.error, AssertionError, KeyError,
+            IndexError, ValueError, MemoryError, OverflowError, EOFError) as exc:  # damaged
         if isinstance(exc, RecordingError):
             raise
         raise RecordingError(f'{path}: not a readable rosbag2 recording: '
@@ -208,7 +211,8 @@ class _Parsed:
         try:
             manifest = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise ValueError(f'manifest is not valid YAML: {exc}') from None
+            raise ValueError(f'manifest is not valid YAML: {" ".join(str(exc).split())}') \
+                from None
         check_manifest(manifest, manifest.get('channels', 8) if isinstance(manifest, dict)
                        else 8)
         self.manifest = manifest

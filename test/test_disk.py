@@ -75,8 +75,9 @@ def test_a_directory_that_takes_no_file_is_named_with_why(tmp_path, monkeypatch,
     assert json.loads(target.read_text()) == {'kept': True}
 
 
-def test_results_on_a_full_disk_keep_the_earlier_file_and_leave_no_debris(tmp_path,
-                                                                         full_disk):
+def test_results_on_a_full_disk_keep_the_earlier_file_and_leave_no_debris(
+        tmp_path,
+        full_disk):
     target = tmp_path / 'results.json'
     target.write_text('{"kept": true}\n')
     with pytest.raises(files.WriteError, match=r'no space left on the device \(ENOSPC\); '

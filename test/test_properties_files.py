@@ -5,6 +5,7 @@ project's own error type (ValueError and its kinds, FileNotFoundError), never an
 exception."""
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -20,7 +21,10 @@ from khepera_noise_ros.experiment import config as replicate_config
 from khepera_noise_ros.gap import simconfig
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
 
-SETTINGS = settings(max_examples=200, deadline=None,
+# examples per test: a few dozen in the suite (files make them slow); set
+# KHEPERA_NOISE_EXAMPLES=200 for the thorough run docs/robustness.md reports
+EXAMPLES = int(os.environ.get('KHEPERA_NOISE_EXAMPLES', '40'))
+SETTINGS = settings(max_examples=EXAMPLES, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 REFUSALS = (ValueError, FileNotFoundError)      # RecordingError, ProtocolError are ValueErrors
 
@@ -133,7 +137,7 @@ def _mcap(folder: Path) -> Path:
     return next(folder.glob('*.mcap'))
 
 
-@settings(SETTINGS, max_examples=60)
+@settings(SETTINGS, max_examples=max(EXAMPLES // 2, 10))
 @given(data=st.data(), which=st.sampled_from(['mcap', 'metadata']))
 def test_a_damaged_bag_loads_or_is_refused(data, which):
     folder = Path(tempfile.mkdtemp(dir=WORK)) / 'bag'

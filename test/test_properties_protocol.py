@@ -4,6 +4,7 @@ reason of the project's own error type, never another exception."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -12,7 +13,7 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.reality import serial_protocol as sp
 
-SETTINGS = settings(max_examples=300, deadline=None,
+SETTINGS = settings(max_examples=int(os.environ.get('KHEPERA_NOISE_EXAMPLES', '150')), deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 
 

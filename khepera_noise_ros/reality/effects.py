@@ -218,7 +218,7 @@ class EffectsConfig:
         if data.get('format', FORMAT) != FORMAT:
             raise ValueError(f'{source}: format must be {FORMAT!r}, got {data["format"]!r}')
         bases = {'real_robot': REAL_ROBOT, 'none': cls.none()}
-        if data.get('base', 'real_robot') not in bases:
+        if str(data.get('base', 'real_robot')) not in bases:     # str: a list is no key
             raise ValueError(f'{source}: base must be one of {sorted(bases)}, '
                              f'got {data["base"]!r}')
         config = bases[data.get('base', 'real_robot')]
