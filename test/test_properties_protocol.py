@@ -13,7 +13,8 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.reality import serial_protocol as sp
 
-SETTINGS = settings(max_examples=int(os.environ.get('KHEPERA_NOISE_EXAMPLES', '150')), deadline=None,
+EXAMPLES = int(os.environ.get('KHEPERA_NOISE_EXAMPLES', '150'))   # 300: the thorough run
+SETTINGS = settings(max_examples=EXAMPLES, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 
 
