@@ -97,8 +97,8 @@ def command(*args: str) -> list[str]:
 
 
 def start(args: list[str], domain: int, cwd=None, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen(args, env=env(domain), cwd=cwd or ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kwargs)
+    kwargs = {'stdout': subprocess.PIPE, 'stderr': subprocess.PIPE, **kwargs}
+    return subprocess.Popen(args, env=env(domain), cwd=cwd or ROOT, text=True, **kwargs)
 
 
 def stop(proc: subprocess.Popen, how: int, timeout: float = 10.0) -> tuple[int | None, float]:

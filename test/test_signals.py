@@ -5,6 +5,7 @@ and each measured time is printed (``pytest -s``)."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import time
 
@@ -12,7 +13,7 @@ import pytest
 import yaml
 
 from conftest import next_domain_id
-from processes import command, cpu_seconds, kill, opened, start, stop, wait_until
+from processes import command, kill, opened, start, stop, wait_until
 
 TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 40},
         'phase2': {'population': 3, 'generations': 10}, 'task': {'steps': 10},
@@ -40,9 +41,10 @@ def graph_evolve(tmp_path):
 
 def evolve(tmp_path):
     partial = tmp_path / 'e.partial.json'
+    bar = tmp_path / 'stderr.log'               # its progress bar: a generation done
     return (command('evolve', '--population', '6', '--generations', '100000', '--steps', '10',
-                    '--quiet', '--out', str(tmp_path / 'e.json')),
-            lambda pid: cpu_seconds(pid) > 3.0,            # imported, and evolving
+                    '--out', str(tmp_path / 'e.json')),
+            lambda pid: re.search(r'\| *[1-9][0-9]*/100000', bar.read_text()),
             lambda: json.loads(partial.read_text())['trials'][0]['history'])
 
 
@@ -53,10 +55,14 @@ def emulate(tmp_path):
 
 
 def record(tmp_path):
+    earlier = tmp_path / 'rec.csv'
+    earlier.write_text('an earlier recording\n')
+    # a recording is written whole at its end: stopped before, it writes nothing (no partial
+    # recording) and leaves an earlier one of the same name as it was
     return (command('record', str(tmp_path / 'rec'), '--robot', 'emulator', '--samples',
                     '5000', '--pace', '--period', '0.01'),
             lambda pid: opened(pid, '/dev/ptmx') and time.sleep(1) is None,  # recording
-            lambda: True)                   # nothing is written before the end: nothing lost
+            lambda: earlier.read_text() == 'an earlier recording\n')
 
 
 COMMANDS = {'replicate': replicate, 'graph-evolve': graph_evolve, 'evolve': evolve,
@@ -67,14 +73,17 @@ COMMANDS = {'replicate': replicate, 'graph-evolve': graph_evolve, 'evolve': evol
 @pytest.mark.parametrize('name', sorted(COMMANDS))
 def test_a_signal_stops_the_command_cleanly_with_its_results_saved(name, how, tmp_path):
     args, running, saved = COMMANDS[name](tmp_path)
-    proc = start(args, next_domain_id())
+    log = tmp_path / 'stderr.log'
+    with open(log, 'w') as stderr:
+        proc = start(args, next_domain_id(), stderr=stderr)
     try:
         assert wait_until(lambda: proc.poll() is not None or running(proc.pid), 90)
-        assert proc.poll() is None, f'{name} ended early: {proc.communicate()[1][-2000:]}'
+        assert proc.poll() is None, f'{name} ended early: {log.read_text()[-2000:]}'
         code, seconds = stop(proc, how, LIMIT_S)
         print(f'\n{name}: {signal.Signals(how).name} -> exit {code} in {seconds:.2f} s')
         assert code is not None, f'{name} still running {LIMIT_S} s after {how!r}'
-        _, err = proc.communicate(timeout=30)
+        proc.communicate(timeout=30)
+        err = log.read_text()
         assert code in (0, 130), err[-2000:]
         assert 'Traceback' not in err, err[-3000:]
         assert saved(), f'{name}: its partial results were not saved'
