@@ -280,8 +280,8 @@ def _effect_from(name: str, values: Any, base):
 
 def _number(key: str, value, low: float, high: float, integer: bool = False) -> None:
     types = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, types) or not np.isfinite(value) \
-            or not low <= value <= high:
+    if isinstance(value, bool) or not isinstance(value, types) or not low <= value <= high \
+            or not np.isfinite(float(value)):     # range first: a huge int is no float
         what = 'an integer' if integer else 'a number'
         raise ValueError(f'{key} must be {what} in [{low:g}, {high:g}], got {value!r}')
 
