@@ -5,6 +5,7 @@ project's own error type (ValueError and its kinds, FileNotFoundError), never an
 exception."""
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -19,6 +20,7 @@ from khepera_noise_ros.bag import read_bag, write_bag
 from khepera_noise_ros.core.task import Episodes, Task, Trace
 from khepera_noise_ros.experiment import config as replicate_config
 from khepera_noise_ros.gap import simconfig
+from khepera_noise_ros.nodes.checkpoint import FORMAT as CHECKPOINT, Checkpoint
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
 
 # examples per test: a few dozen in the suite (files make them slow); set
@@ -213,3 +215,20 @@ def test_the_damaging_strategies_start_from_files_that_load():
     check_recording(recording.load(folder / 'ok.csv'))
     check_recording(read_bag(BAG))
     assert isinstance(replicate_config.load(None), replicate_config.ReplicateConfig)
+
+
+# -- the evolution checkpoint -----------------------------------------------------------
+
+@SETTINGS
+@given(data=st.data(), values=st.dictionaries(
+    st.sampled_from(['format', 'config', 'generation', 'history', 'batches', 'episodes']),
+    yaml_values, max_size=4))
+def test_any_checkpoint_file_loads_or_is_refused(data, values):
+    path = written('run.checkpoint.json', data.draw(st.one_of(
+        st.binary(max_size=100),
+        st.just(json.dumps({'format': CHECKPOINT, 'config': {}, 'batches': [], **values},
+                           default=str).encode()))))
+    checkpoint = Checkpoint(path, {})
+    if loads_or_refuses(checkpoint.load):
+        assert all(isinstance(b['fitness'], list) for b in checkpoint.batches)
+    shutil.rmtree(path.parent)
