@@ -5,6 +5,7 @@ project's own error type (ValueError and its kinds, FileNotFoundError), never an
 exception."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -19,7 +20,7 @@ from khepera_noise_ros import recording
 from khepera_noise_ros.bag import read_bag, write_bag
 from khepera_noise_ros.core.task import Episodes, Task, Trace
 from khepera_noise_ros.experiment import config as replicate_config
-from khepera_noise_ros.gap import simconfig
+from khepera_noise_ros.gap import effects as fx, simconfig
 from khepera_noise_ros.nodes.checkpoint import FORMAT as CHECKPOINT, Checkpoint
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
 
@@ -232,3 +233,19 @@ def test_any_checkpoint_file_loads_or_is_refused(data, values):
     if loads_or_refuses(checkpoint.load):
         assert all(isinstance(b['fitness'], list) for b in checkpoint.batches)
     shutil.rmtree(path.parent)
+
+
+# -- the simulator's effects parameter (gap/effects.py) --------------------------------
+
+@SETTINGS
+@given(data=st.data())
+def test_any_effects_parameter_loads_or_is_refused(data):
+    name = data.draw(st.sampled_from(sorted(fx.TYPES)))
+    fields = [f.name for f in dataclasses.fields(fx.TYPES[name])]
+    effect = {'name': name, **data.draw(st.dictionaries(
+        st.sampled_from(fields + ['junk']), yaml_values, max_size=len(fields)))}
+    text = data.draw(st.one_of(st.just(json.dumps([effect], default=str)),
+                               st.text(max_size=60), st.just(json.dumps(effect, default=str))))
+    loaded = loads_or_refuses(fx.loads, text)
+    if loaded:
+        assert fx.loads(fx.dumps(loaded)) == loaded       # what loads, writes back the same
