@@ -37,6 +37,7 @@ import yaml
 from scipy.special import ndtr
 
 from ..core.khepera import DARK, SENSORS
+from ..files import atomic_write_text
 
 FORMAT = 'khepera-noise-effects/1'
 EFFECTS = ('correlated_noise', 'intensity_dependent_noise', 'sensor_gain_offset',
@@ -247,8 +248,8 @@ class EffectsConfig:
 
     def save(self, path) -> Path:
         path = Path(path)
-        path.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False,
-                                       default_flow_style=None))
+        atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False,
+                                               default_flow_style=None))
         return path
 
 
