@@ -13,8 +13,8 @@ import yaml
 from conftest import next_domain_id
 from processes import ROOT, alive, command, descendants, kill, start, wait_until
 
-TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 40},
-        'phase2': {'population': 3, 'generations': 10}, 'task': {'steps': 10},
+TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 2000},
+        'phase2': {'population': 3, 'generations': 200}, 'task': {'steps': 10},
         'reality': {'robots': 4}}
 
 
@@ -112,7 +112,7 @@ def test_sigkill_of_a_command_leaves_none_of_its_processes(name, tmp_path):
         # running: its children started (and had a moment to start theirs), or some output
         if spawns:
             assert wait_until(lambda: descendants(proc.pid) or proc.poll() is not None, 60)
-            wait_until(lambda: proc.poll() is not None, 3)
+            wait_until(lambda: proc.poll() is not None, 1)
         else:
             wait_until(lambda: proc.poll() is not None, 4)
         assert proc.poll() is None, f'{name} ended early: {proc.communicate()[1][-2000:]}'
