@@ -249,3 +249,28 @@ def test_any_effects_parameter_loads_or_is_refused(data):
     loaded = loads_or_refuses(fx.loads, text)
     if loaded:
         assert fx.loads(fx.dumps(loaded)) == loaded       # what loads, writes back the same
+
+
+ODD = [None, [], {}, 'x', -1, 1.5, 10 ** 30, float('nan'), [[1]], [None], {'a': None}]
+
+
+def test_every_setting_of_every_loader_with_an_odd_value_loads_or_is_refused():
+    """Each top-level key (and each field one level down) of the replicate config, the
+    effects file and the simulator parameters, set in turn to each odd value."""
+    cases = []
+    for key, default in replicate_config.DEFAULTS.items():
+        cases += [(replicate_config.load, {key: v}) for v in ODD]
+        if isinstance(default, dict):
+            cases += [(replicate_config.load, {key: {k: v}}) for k in default for v in ODD]
+    for effect, fields in EffectsConfig.real_robot().to_dict()['effects'].items():
+        cases += [(EffectsConfig.load, {'effects': {effect: {k: v}}}) for k in fields
+                  for v in ODD]
+    cases += [(EffectsConfig.load, {k: v}) for k in ('format', 'base', 'sensor_noise',
+                                                     'effects') for v in ODD]
+    cases += [(simconfig.load, {'/**': {'ros__parameters': {k: v}}}) for k in SIM_KEYS
+              for v in ODD]
+    for load, content in cases:
+        path = written('odd.yaml', yaml.safe_dump(content).encode())
+        loads_or_refuses(load, path)
+        shutil.rmtree(path.parent)
+    assert len(cases) > 500

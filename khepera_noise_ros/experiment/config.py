@@ -170,6 +170,8 @@ def build(data: dict) -> ReplicateConfig:
     test_episodes = _integer(data, 'test_episodes', 1)
     groups = data['dependence_groups']
     distribution = data['distribution']
+    if not isinstance(data['levels'], list):
+        raise ValueError(f'levels must be a list of noise levels, got {data["levels"]!r}')
     levels = tuple(_level(spec, groups, distribution, i) for i, spec in enumerate(data['levels']))
     if not levels:
         raise ValueError('levels: at least one noise level is needed')
