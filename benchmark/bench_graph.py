@@ -43,6 +43,7 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
+from khepera_noise_ros import lifeline  # noqa: E402
 from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.nodes.graph import GraphEvaluator  # noqa: E402
@@ -74,8 +75,8 @@ def window(evaluate, genomes, seeds, steps: int, seconds: float,
 @contextmanager
 def processes(commands: list[list[str]]):
     """Node processes (``-m`` module and arguments), stopped with SIGINT at the end."""
-    procs = [subprocess.Popen([sys.executable, '-m', *c, '--log-level', 'warn'],
-                              env=os.environ) for c in commands]
+    procs = [lifeline.popen([sys.executable, '-m', *c, '--log-level', 'warn'],
+                            sig=signal.SIGTERM, env=os.environ) for c in commands]
     try:
         yield procs
     finally:

@@ -13,7 +13,7 @@ import os
 import pkgutil
 import sys
 
-from . import __version__, commands
+from . import __version__, commands, files, lifeline
 from .commands._options import UsageError
 
 
@@ -55,7 +55,23 @@ def _unavailable(name: str, exc: ImportError):
 
 def main(argv=None) -> int:
     loopback_only()
-    args = build_parser().parse_args(argv)
+    lifeline.from_environment()
+    with lifeline.terminate_as_interrupt():         # kill (SIGTERM) saves what Ctrl-C saves
+        try:
+            args = build_parser().parse_args(argv)
+        except KeyboardInterrupt:                   # stopped while loading the commands
+            return 130
+        status = _run(args)
+    if status == 130 and argv is None:
+        # stopped, and this process is the command: what it saves is written and closed,
+        # so skip the interpreter's and DDS's teardown (seconds on a busy machine)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
+def _run(args) -> int:
     try:
         return int(args.run(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:
@@ -68,6 +84,11 @@ def main(argv=None) -> int:
         # `khepera-noise ... | head`: the reader left; stop quietly like other CLI tools
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        if not files.refused(exc):
+            raise
+        print(f'khepera-noise {args.command}: error: {files.describe(exc)}', file=sys.stderr)
+        return 1
 
 
 if __name__ == '__main__':

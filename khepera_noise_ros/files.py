@@ -1,28 +1,117 @@
-"""Writing result files so that a crash never leaves a half-written one behind."""
+"""Writing result files so that a crash or a full disk never leaves a half-written one behind.
+
+Every writer goes through a temporary file beside the target and an
+``os.replace``, so the target holds the old content or the new, never part
+of one.  A write the disk refuses (full, read-only, not allowed) raises
+``WriteError``: an ``OSError`` with a one-line message that names the file,
+says why, and says that what was there before is unchanged.
+"""
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
+
+# the disk refusing, as opposed to a mistake in the path
+REASONS = {errno.ENOSPC: 'no space left on the device', errno.EDQUOT: 'disk quota exceeded',
+           errno.EROFS: 'read-only file system', errno.EACCES: 'permission denied',
+           errno.EPERM: 'operation not permitted', errno.EIO: 'input/output error',
+           errno.EFBIG: 'file too large'}
+
+
+class WriteError(OSError):
+    """A file the disk would not take; ``str()`` is one line for the user."""
+
+    def __init__(self, path, exc: OSError):
+        super().__init__(exc.errno, str(exc))
+        self.path = Path(path)
+        code = errno.errorcode.get(exc.errno, '')
+        reason = REASONS.get(exc.errno, exc.strerror or str(exc))
+        kept = ('its earlier content is unchanged' if self.path.exists()
+                else 'nothing was written there')
+        self.message = f'cannot write {self.path}: {reason}' + (f' ({code})' if code else '') \
+            + f'; {kept}'
+
+    def __str__(self) -> str:
+        return self.message
+
+
+def refused(exc: BaseException) -> bool:
+    """Is ``exc`` the disk refusing a write (full, read-only, not allowed)?"""
+    return isinstance(exc, OSError) and exc.errno in REASONS
+
+
+def describe(exc: OSError) -> str:
+    """One line for a write the disk refused, a ``WriteError`` or a bare ``OSError``."""
+    if isinstance(exc, WriteError):
+        return exc.message
+    where = f' {exc.filename}' if exc.filename else ''
+    return (f'cannot write{where}: {REASONS.get(exc.errno, exc.strerror)} '
+            f'({errno.errorcode.get(exc.errno, exc.errno)}); files finished before are kept')
+
+
+@contextlib.contextmanager
+def atomic_open(path, mode: str = 'w', **kwargs) -> Iterator:
+    """``open(path, mode)`` into a temporary file beside ``path``, renamed into place when the
+    block ends without error (flushed and fsync'ed first); removed otherwise."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
+    except OSError as exc:
+        raise (WriteError(path, exc) if refused(exc) else exc) from None
+    try:
+        with os.fdopen(fd, mode, **kwargs) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if refused(exc) and not isinstance(exc, WriteError):
+            raise WriteError(path, exc) from None
+        raise
 
 
 def atomic_write_text(path, text: str) -> Path:
     """Write to a temporary file beside ``path``, then rename it into place."""
+    with atomic_open(path) as f:
+        f.write(text)
+    return Path(path)
+
+
+def staging_path(path) -> Path:
+    """A path beside ``path`` (not yet there) to build a directory in before
+    ``replace_tree`` puts it in place; removed with its parent by ``replace_tree``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
     try:
-        with os.fdopen(fd, 'w') as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(dir=path.parent, prefix=f'.{path.name}.')) / path.name
+    except OSError as exc:
+        raise (WriteError(path, exc) if refused(exc) else exc) from None
+
+
+def replace_tree(staged, path) -> Path:
+    """Put the directory built at ``staged`` (from ``staging_path``) in place of ``path``:
+    the old one is moved aside first and removed only once the new one is in."""
+    staged, path = Path(staged), Path(path)
+    aside = staged.parent / '.old'
+    try:
+        if path.exists():
+            os.replace(path, aside)
+        os.replace(staged, path)
+    except OSError as exc:
+        if aside.exists() and not path.exists():
+            os.replace(aside, path)
+        raise (WriteError(path, exc) if refused(exc) else exc) from None
+    shutil.rmtree(staged.parent, ignore_errors=True)
     return path
 
 

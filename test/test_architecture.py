@@ -13,7 +13,7 @@ MAX_LINES = 500
 
 # Lower layers never import higher ones; a module may import its own layer or below.
 LAYERS = (
-    ('files', 'core'),                               # plain utilities and the paper's model
+    ('files', 'lifeline', 'core'),                          # plain utilities and the paper's model
     ('recording', 'bag', 'convert', 'reality', 'gap', 'synchrony'),   # data, worlds, analyses
     ('nodes', 'experiment'),                         # ROS adapters, the replication protocol
     ('commands',),                                   # one module per subcommand

@@ -9,6 +9,7 @@ The same --seed gives the same result.  Use --seed-genome for a seeded start
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +69,14 @@ def run(args) -> int:
     # same trials in process and through the graph
     eas = [evolution.SteadyStateEA(config, args.seed + k, seed_genome)
            for k in range(args.trials)]
-    evolution.evolve(eas, evaluate, progress=_progress_bar(eas, args.quiet))
+    try:
+        evolution.evolve(eas, evaluate, progress=_progress_bar(eas, args.quiet))
+    except KeyboardInterrupt:       # Ctrl-C or kill: keep the generations finished so far
+        if all(ea.history for ea in eas):
+            partial = write_json(args.out.with_suffix('.partial.json'),
+                                 _result(args, noise, config, eas) | {'interrupted': True})
+            print(f'stopped; the generations finished so far are in {partial}', file=sys.stderr)
+        raise
     write_json(args.out, _result(args, noise, config, eas))
     for k, ea in enumerate(eas):
         print(f'trial {k}: best fitness {ea.best_fitness:.3f} at generation '

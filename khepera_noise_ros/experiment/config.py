@@ -156,7 +156,7 @@ def read_yaml(path) -> dict:
         try:
             loaded = yaml.safe_load(f)
         except yaml.YAMLError as exc:
-            raise ValueError(f'{path} is not valid YAML: {exc}') from None
+            raise ValueError(f'{path} is not valid YAML: {" ".join(str(exc).split())}') from None
     loaded = loaded or {}
     if not isinstance(loaded, dict):
         raise ValueError(f'{path} must hold a mapping of settings, got {type(loaded).__name__}')
@@ -194,6 +194,8 @@ def build(data: dict) -> ReplicateConfig:
     test_episodes = _integer(data, 'test_episodes', 1)
     groups = data['dependence_groups']
     distribution = data['distribution']
+    if not isinstance(data['levels'], list):
+        raise ValueError(f'levels must be a list of noise levels, got {data["levels"]!r}')
     levels = tuple(_level(spec, groups, distribution, i) for i, spec in enumerate(data['levels']))
     if not levels:
         raise ValueError('levels: at least one noise level is needed')

@@ -80,7 +80,10 @@ def from_parameters(values: dict, source: str = 'parameters') -> SimConfig:
                            independent=float(values.get('independent_level', n.independent)),
                            groups=parse_groups(groups) if isinstance(groups, str) else groups,
                            distribution=values.get('distribution', n.distribution))
-        effects = fx.loads(values.get('effects', '') or '')
+        text = values.get('effects', '') or ''
+        if not isinstance(text, str):       # a number or a list would fail inside loads
+            raise ValueError(f'effects must be a string of effects, got {text!r}')
+        effects = fx.loads(text)
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{source}: {exc}') from None
     seed = values.get('seed', 0)
@@ -99,7 +102,7 @@ def load(path=None) -> SimConfig:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise ValueError(f'{path}: not valid YAML: {exc}') from None
+        raise ValueError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
     return from_parameters(_node_parameters(data, path), str(path))
 
 

@@ -67,18 +67,26 @@ class Checkpoint:
             return False
         try:
             data = json.loads(self.path.read_text())
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError) as exc:      # UnicodeDecodeError, JSONDecodeError
             raise ValueError(f'checkpoint {self.path} cannot be read: {exc}') from None
         if not isinstance(data, dict) or data.get('format') != FORMAT:
             raise ValueError(f'{self.path} is not a {FORMAT} file')
         theirs = data.get('config', {})
+        if not isinstance(theirs, dict):
+            raise ValueError(f'checkpoint {self.path} is damaged: its config is not a mapping')
         differ = sorted(k for k in set(theirs) | set(self.config)
                         if theirs.get(k) != self.config.get(k))
         if differ:
             raise ValueError(f'checkpoint {self.path} belongs to another run (it differs in '
                              f'{", ".join(differ)}); set resume to false to start afresh and '
                              'overwrite it, or choose another checkpoint_path')
-        self.batches = data['batches']
+        batches = data.get('batches')
+        if not isinstance(batches, list) or not all(
+                isinstance(b, dict) and isinstance(b.get('digest'), str)
+                and isinstance(b.get('fitness'), list) for b in batches):
+            raise ValueError(f'checkpoint {self.path} is damaged: its batches must be a list '
+                             'of {digest, fitness}; set resume to false to start afresh')
+        self.batches = batches
         self.loaded = len(self.batches)
         self.state = {k: v for k, v in data.items() if k not in ('format', 'config', 'batches')}
         return True

@@ -32,6 +32,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
+from .. import lifeline
 from .controller import Controller
 from .runtime import events_executor, spin_forever, spinning
 
@@ -54,6 +55,7 @@ def robot_class(argv: list[str]):
 def main(args=None) -> int:
     argv = sys.argv if args is None else args
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')   # unless asked
+    lifeline.from_environment()         # started by a parent that may die: end with it
     nodes = []
     try:
         robot = robot_class(argv)

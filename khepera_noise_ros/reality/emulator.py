@@ -366,7 +366,8 @@ class EmulatorProcess:
         import multiprocessing
         forking = multiprocessing.get_context('fork')
         self._conn, child = forking.Pipe()
-        self._process = forking.Process(target=_serve_child, args=(*self._args, child),
+        self._process = forking.Process(target=_serve_child,
+                                        args=(os.getpid(), *self._args, child),
                                         name='khepera-emulator', daemon=True)
         self._process.start()
         child.close()
@@ -389,9 +390,13 @@ class EmulatorProcess:
         self._conn.close()
 
 
-def _serve_child(world: EmulatedWorld, kwargs: dict, conn) -> None:
+def _serve_child(parent: int, world: EmulatedWorld, kwargs: dict, conn) -> None:
     import signal
+
+    from ..lifeline import die_with_parent
+    die_with_parent(parent)             # a SIGKILLed parent must not leave us holding the ptys
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)   # the parent stops us; or its death
     with Emulator(world, **kwargs) as emulator:
         conn.send(emulator.ports)
         try:

@@ -9,12 +9,13 @@ same.  ``rosbags`` is imported lazily: only bag users need it.
 from __future__ import annotations
 
 import math
-import shutil
+import struct
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from ..files import replace_tree, staging_path
 from .model import (Recording, RecordingError, check_manifest, check_sequence,
                     dump_manifest, finish_manifest, first_bad_row)
 
@@ -50,9 +51,9 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
         if not (overwrite and (path / 'metadata.yaml').is_file()):
             raise FileExistsError(f'{path} exists; choose another name'
                                   + ('' if overwrite else ' or allow overwriting'))
-        shutil.rmtree(path)
     period_ns = manifest['sample_period_s'] * 1e9
-    writer = rosbag2.Writer(path, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP)
+    staged = staging_path(path)         # the old bag stays until the new one is complete
+    writer = rosbag2.Writer(staged, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP)
     with writer:
         conn = {t: writer.add_connection(_topic(namespace, t), TYPES[t], typestore=store,
                                          offered_qos_profiles=[_qos(t)])
@@ -78,7 +79,7 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
             if not math.isnan(rec.direction[i]):
                 put(CMD_TURN, stamp, _multiarray(store, CMD_TURN, key,
                                                  [rec.direction[i], rec.power[i]]))
-    return path
+    return replace_tree(staged, path)
 
 
 def _qos(topic: str):
@@ -119,6 +120,7 @@ def _multiarray(store, topic: str, key: tuple[int, int], values):
 def read_bag(path) -> Recording:
     """Read a rosbag2 directory written by ``write_bag`` (or recorded from the topics)."""
     rosbag2, store = _rosbags()
+    from rosbags.serde import SerdeError
     path = Path(path)
     if not (path / 'metadata.yaml').is_file():
         raise FileNotFoundError(f'{path}: not a rosbag2 directory (no metadata.yaml)')
@@ -128,10 +130,12 @@ def read_bag(path) -> Recording:
             parsed = _Parsed(path, topics)
             for connection, _, raw in reader.messages(list(topics.values())):
                 parsed.add(connection, store.deserialize_cdr(raw, connection.msgtype))
-    except (rosbag2.ReaderError, AssertionError, KeyError, IndexError, ValueError) as exc:
+    except (rosbag2.ReaderError, SerdeError, struct.error, AssertionError, KeyError,
+            IndexError, ValueError, MemoryError, OverflowError, EOFError) as exc:  # damaged
         if isinstance(exc, RecordingError):
             raise
-        raise RecordingError(f'{path}: not a readable rosbag2 recording: {exc}') from None
+        raise RecordingError(f'{path}: not a readable rosbag2 recording: '
+                             f'{" ".join(str(exc).split())}') from None
     return parsed.recording()
 
 
@@ -198,7 +202,8 @@ class _Parsed:
         try:
             manifest = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise ValueError(f'manifest is not valid YAML: {exc}') from None
+            raise ValueError(f'manifest is not valid YAML: {" ".join(str(exc).split())}') \
+                from None
         check_manifest(manifest, manifest.get('channels', 8) if isinstance(manifest, dict)
                        else 8)
         self.manifest = manifest

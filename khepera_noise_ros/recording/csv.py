@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..files import atomic_open, atomic_write_text
 from .model import (COLUMNS, KHEPERA_CHANNELS, Recording, RecordingError, check_manifest,
                     check_sequence, columns, dump_manifest, finish_manifest, first_bad_row)
 
@@ -25,14 +26,14 @@ def write_csv(rec: Recording, path) -> tuple[Path, Path]:
     csv_path, yaml_path = paths(path)
     manifest = finish_manifest(rec)
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, 'w', newline='') as f:
+    with atomic_open(csv_path, newline='') as f:      # the old file stays until complete
         writer = csv.writer(f, lineterminator='\n')
         writer.writerow(columns(rec.channels))
         for i in range(len(rec)):
             writer.writerow([int(rec.episode[i]), int(rec.step[i]), _cell(rec.heading_deg[i]),
                              str(rec.condition[i])] + [_cell(v) for v in rec.readings[i]]
                             + [_cell(rec.direction[i]), _cell(rec.power[i])])
-    yaml_path.write_text(dump_manifest(manifest))
+    atomic_write_text(yaml_path, dump_manifest(manifest))
     return csv_path, yaml_path
 
 
@@ -56,7 +57,7 @@ def read_manifest(path) -> dict:
         line = f' line {mark.line + 1}' if mark is not None else ''
         raise RecordingError(f'{path}{line}: not valid YAML: {exc.problem}') from None
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise RecordingError(f'{path}: not valid YAML: {exc}') from None
+        raise RecordingError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
     return manifest
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from ...core.khepera import DARK, SENSORS
+from ...files import atomic_write_text
 
 FORMAT = 'khepera-noise-effects/1'
 EFFECTS = ('correlated_noise', 'intensity_dependent_noise', 'sensor_gain_offset',
@@ -196,7 +197,7 @@ class EffectsConfig:
         if data.get('format', FORMAT) != FORMAT:
             raise ValueError(f'{source}: format must be {FORMAT!r}, got {data["format"]!r}')
         bases = {'real_robot': REAL_ROBOT, 'none': cls.none()}
-        if data.get('base', 'real_robot') not in bases:
+        if str(data.get('base', 'real_robot')) not in bases:     # str: a list is no key
             raise ValueError(f'{source}: base must be one of {sorted(bases)}, '
                              f'got {data["base"]!r}')
         config = bases[data.get('base', 'real_robot')]
@@ -220,13 +221,13 @@ class EffectsConfig:
             try:
                 data = yaml.safe_load(f)
             except yaml.YAMLError as exc:
-                raise ValueError(f'{path}: not valid YAML: {exc}') from None
+                raise ValueError(f'{path}: not valid YAML: {" ".join(str(exc).split())}') from None
         return cls.from_dict(data if data is not None else {}, str(path))
 
     def save(self, path) -> Path:
         path = Path(path)
-        path.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False,
-                                       default_flow_style=None))
+        atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False,
+                                               default_flow_style=None))
         return path
 
 
@@ -258,8 +259,8 @@ def _effect_from(name: str, values: Any, base):
 
 def _number(key: str, value, low: float, high: float, integer: bool = False) -> None:
     types = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, types) or not np.isfinite(value) \
-            or not low <= value <= high:
+    if isinstance(value, bool) or not isinstance(value, types) or not low <= value <= high \
+            or not np.isfinite(float(value)):     # range first: a huge int is no float
         what = 'an integer' if integer else 'a number'
         raise ValueError(f'{key} must be {what} in [{low:g}, {high:g}], got {value!r}')
 
