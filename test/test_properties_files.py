@@ -46,7 +46,7 @@ def sample_recording() -> recording.Recording:
     readings, rows = env.reset(5, 2, bearing_deg=[0.0, 30.0]), []
     zeros = np.zeros(2, np.int32)
     while readings is not None:
-        rows.append((env.bearing_deg, readings.T.copy(), zeros + 1, zeros))
+        rows.append((env.bearing_deg, readings.copy(), zeros + 1, zeros))
         readings = env.step(zeros + 1, zeros)
     manifest = {'format': recording.FORMAT, 'source': 'simulator', 'sample_period_s': 1.0,
                 'conditions': {'bright': {'lamp_distance_mm': 5.0}}}

@@ -137,7 +137,7 @@ def load(path=None, quick: bool = False, overrides: dict | None = None,
     given = read_yaml(path) if path is not None else {}
     protocol = protocol if protocol is not None else given.get('protocol')
     if protocol is not None:
-        if protocol not in PROTOCOLS:
+        if not isinstance(protocol, str) or protocol not in PROTOCOLS:
             raise ValueError(f'protocol must be one of {sorted(PROTOCOLS)}, got {protocol!r}')
         data = merge(data, {**PROTOCOLS[protocol], 'protocol': protocol}, 'protocol')
     if path is not None:
