@@ -9,6 +9,7 @@ import re
 import signal
 import time
 
+import numpy as np
 import pytest
 import yaml
 
@@ -57,12 +58,21 @@ def emulate(tmp_path):
 def record(tmp_path):
     earlier = tmp_path / 'rec.csv'
     earlier.write_text('an earlier recording\n')
-    # a recording is written whole at its end: stopped before, it writes nothing (no partial
-    # recording) and leaves an earlier one of the same name as it was
+    # stopped, it keeps the episodes it finished: 5 conditions x 8 headings of 30 paced
+    # samples each take about 12 s, so a stop after the second leaves some undone
+    headings = ['0', '45', '90', '135', '180', '225', '270', '315']
     return (command('record', str(tmp_path / 'rec'), '--robot', 'emulator', '--samples',
-                    '5000', '--pace', '--period', '0.01'),
-            lambda pid: opened(pid, '/dev/ptmx') and time.sleep(1) is None,  # recording
-            lambda: earlier.read_text() == 'an earlier recording\n')
+                    '30', '--pace', '--period', '0.01', '--no-bag', '--headings', *headings),
+            lambda pid: opened(pid, '/dev/ptmx') and time.sleep(2) is None,  # recording
+            lambda: _finished_episodes_saved(tmp_path / 'rec', 30, 5 * len(headings)))
+
+
+def _finished_episodes_saved(path, samples: int, planned: int) -> bool:
+    from khepera_noise_ros.recording import read_csv
+    rec = read_csv(path)
+    episodes = np.unique(rec.episode)
+    return (rec.manifest.get('interrupted') is True and 0 < episodes.size < planned
+            and len(rec) == episodes.size * samples)
 
 
 COMMANDS = {'replicate': replicate, 'graph-evolve': graph_evolve, 'evolve': evolve,

@@ -11,6 +11,7 @@ node is started in this process (--robot) or is already running (--attach).
 """
 from __future__ import annotations
 
+import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -179,6 +180,17 @@ def run(args) -> int:
         rec, session = record(args)
     except RobotUnavailable as exc:
         raise UsageError(str(exc)) from None
+    except Interrupted as stop:
+        if stop.recording is None:
+            raise
+        _write(args, stop.recording, stop.session)
+        print(f'interrupted: the {len(np.unique(stop.recording.episode))} finished episodes '
+              f'are saved', file=sys.stderr)
+        return 130
+    return _write(args, rec, session)
+
+
+def _write(args, rec: Recording, session: dict) -> int:
     csv_path, yaml_path = write_csv(rec, args.out)
     written = [csv_path, yaml_path]
     if not args.no_bag:
@@ -193,8 +205,31 @@ def run(args) -> int:
     return 0 if not lost else 1
 
 
+class Interrupted(KeyboardInterrupt):
+    """Stopped by a signal; ``recording`` holds the episodes finished before (or None)."""
+
+    def __init__(self, recording: Recording | None, session: dict):
+        super().__init__()
+        self.recording, self.session = recording, session
+
+
+class _Episodes:
+    """The finished episodes of a session, so that a stop keeps them."""
+
+    def __init__(self):
+        self.parts, self.lost, self.manifest = [], [], None
+
+    def recording(self) -> Recording | None:
+        if not self.parts:
+            return None
+        self.manifest['lost_steps'] = self.lost
+        return concatenate(self.parts, self.manifest)
+
+
 def record(args, context=None, robot=None) -> tuple[Recording, dict]:
     """Run the protocol; returns the recording and facts about the session.
+
+    Stopped by Ctrl-C or SIGTERM it raises ``Interrupted`` with the episodes finished so far.
 
     ``context`` is an initialised rclpy Context (default: a new one); ``robot``
     an in-process robot node to record instead of the one ``args`` names.
@@ -231,12 +266,19 @@ def record(args, context=None, robot=None) -> tuple[Recording, dict]:
         recorder.wait_for_robot(executor, args.timeout)
         start_ns = time.time_ns()
         protocol = _stationary if args.protocol == 'stationary' else _closed_loop
+        done = _Episodes()
+        session = (lambda: {'start_ns': start_ns, 'resent': recorder.resent,
+                            'dropped': dict(recorder.dropped), 'namespace': namespace})
         try:
-            rec = protocol(args, recorder, executor, params, source)
+            protocol(args, recorder, executor, params, source, done)
+        except KeyboardInterrupt:
+            partial = done.recording()
+            if partial is not None:
+                partial.manifest['interrupted'] = True
+            raise Interrupted(partial, session()) from None
         finally:
             params.restore()
-        return rec, {'start_ns': start_ns, 'resent': recorder.resent,
-                     'dropped': dict(recorder.dropped), 'namespace': namespace}
+        return done.recording(), session()
     finally:
         executor.shutdown()
         for n in created:
@@ -258,13 +300,13 @@ def _base_manifest(args, params, source: str, protocol: str) -> dict:
     return manifest
 
 
-def _stationary(args, recorder, executor, params, source) -> Recording:
+def _stationary(args, recorder, executor, params, source, done: _Episodes) -> None:
     conditions = parse_conditions(args.conditions)
     manifest = _base_manifest(args, params, source, 'stationary')
     manifest.update(conditions=conditions, headings_deg=list(args.headings),
                     samples_per_episode=args.samples)
     params.set({'perturbation_deg': 0.0, 'steps': args.samples})
-    parts, lost, episode = [], [], 0
+    done.manifest, episode = manifest, 0
     for label, world in conditions.items():
         params.set(world)
         if args.ask:
@@ -272,14 +314,12 @@ def _stationary(args, recorder, executor, params, source) -> Recording:
         for heading in args.headings:
             log = recorder.record_episode(executor, episode, args.seed + episode, args.samples,
                                           hold_still, heading)
-            lost += [[episode, s] for s in log.lost]
-            parts.append(log.recording(label, manifest, heading, acted=False))
+            done.lost += [[episode, s] for s in log.lost]
+            done.parts.append(log.recording(label, manifest, heading, acted=False))
             episode += 1
-    manifest['lost_steps'] = lost
-    return concatenate(parts, manifest)
 
 
-def _closed_loop(args, recorder, executor, params, source) -> Recording:
+def _closed_loop(args, recorder, executor, params, source, done: _Episodes) -> None:
     from .evolve import load_genome
     genome = network.check_genomes(load_genome(args.genome))[0]
     conditions = named_conditions()
@@ -292,11 +332,9 @@ def _closed_loop(args, recorder, executor, params, source) -> Recording:
     params.set({'steps': args.steps, **conditions[args.condition]})
     manifest['task'] = {'steps': args.steps, **task}
     policy = genome_policy(genome)
-    parts, lost = [], []
+    done.manifest = manifest
     for episode in range(args.episodes):
         log = recorder.record_episode(executor, episode, args.seed + episode, args.steps,
                                       policy)
-        lost += [[episode, s] for s in log.lost]
-        parts.append(log.recording(args.condition, manifest, None, acted=True))
-    manifest['lost_steps'] = lost
-    return concatenate(parts, manifest)
+        done.lost += [[episode, s] for s in log.lost]
+        done.parts.append(log.recording(args.condition, manifest, None, acted=True))
