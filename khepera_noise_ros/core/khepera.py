@@ -50,20 +50,32 @@ class World:
                              f'{self.deg_per_power}')
 
     def response(self, relative_deg: np.ndarray) -> np.ndarray:
-        """Reading of a sensor whose axis is ``relative_deg`` away from the lamp."""
+        """Noise-free reading of a sensor whose axis is ``relative_deg`` away from the lamp.
+
+        Args:
+            relative_deg: angles between sensor axes and the lamp, degrees, any shape.
+
+        Returns:
+            Readings of the same shape, ``floor`` .. ``ambient`` (0 bright, 525 dark).
+        """
         a = np.radians(np.abs((np.asarray(relative_deg) + 180.0) % 360.0 - 180.0))
         near = max(self.reach_mm - self.lamp_distance_mm, 0.0) / self.reach_mm
         drop = np.where(a < np.radians(self.half_angle_deg), np.cos(1.5 * a) * near * self.gain, 0)
         return np.maximum(self.ambient - drop, self.floor)
 
     def light_table(self) -> np.ndarray:
-        """(SENSORS, TENTHS) float32: integer reading of each sensor per bearing."""
+        """Every sensor's integer reading at every bearing of the grid.
+
+        Returns:
+            (SENSORS, TENTHS) float32, column ``to_tenths(bearing)``.
+        """
         bearing = np.arange(TENTHS) / 10.0
         rel = bearing[None, :] - np.asarray(SENSOR_ANGLES_DEG)[:, None]
         return np.rint(self.response(rel)).astype(np.float32)
 
     @property
     def tenths_per_power(self) -> int:
+        """Grid steps (tenths of a degree) that one unit of power turns."""
         return int(round(self.deg_per_power * 10))
 
 
@@ -73,13 +85,27 @@ def _check_range(name: str, value: float, low: float, high: float) -> None:
 
 
 def to_tenths(bearing_deg) -> np.ndarray:
-    """Bearing in degrees to the grid index 0..TENTHS-1 (int32)."""
+    """Bearings to grid indices.
+
+    Args:
+        bearing_deg: bearings in degrees, any shape and range.
+
+    Returns:
+        int32 indices 0 .. TENTHS - 1 of the nearest tenth of a degree.
+    """
     return (np.rint(np.asarray(bearing_deg, dtype=np.float64) * 10).astype(np.int64)
             % TENTHS).astype(np.int32)
 
 
 def to_degrees(tenths: np.ndarray) -> np.ndarray:
-    """Grid index to a bearing in degrees in [-180, 180)."""
+    """Grid indices to bearings.
+
+    Args:
+        tenths: grid indices, wrapped or not.
+
+    Returns:
+        Bearings in degrees in [-180, 180).
+    """
     return ((np.asarray(tenths) + TENTHS // 2) % TENTHS - TENTHS // 2) / 10.0
 
 
@@ -89,6 +115,15 @@ def turn(tenths: np.ndarray, direction: np.ndarray, power: np.ndarray,
 
     The grid index is left unwrapped (``% TENTHS`` or ``to_degrees`` wrap it), so
     that callers wrap once per step rather than once per turn.
+
+    Args:
+        tenths: (B,) the lamp's bearings as grid indices.
+        direction: (B,) -1 left or +1 right (clockwise), the paper's first output.
+        power: (B,) 0..9, the paper's second output.
+        world: gives the rotation of one unit of power.
+
+    Returns:
+        (B,) new grid indices, unwrapped.
     """
     step = direction * power
     step *= world.tenths_per_power
