@@ -106,6 +106,16 @@ def test_network_outputs_map_to_direction_and_power():
     assert direction.tolist() == [-1, 1] and power.tolist() == [9, 4]
 
 
+def test_sensor_major_readings_are_refused_not_broadcast():
+    """One robot's readings as an (8, 1) column would broadcast into eight one-sensor
+    robots; the network refuses them instead of answering for the wrong robot."""
+    weights = network.unpack(np.zeros((1, network.GENES)))
+    with pytest.raises(ValueError, match='batch first'):
+        network.act(weights, np.full((8, 1), 300.0, np.float32))
+    direction, power = network.act(weights, np.full((1, 8), 300.0, np.float32))
+    assert direction.shape == power.shape == (1,)
+
+
 @pytest.mark.parametrize('bad', [np.zeros(19), np.zeros((2, 21)), [np.nan] * 20])
 def test_bad_genomes_are_named(bad):
     with pytest.raises(ValueError, match='gene'):

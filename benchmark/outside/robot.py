@@ -105,7 +105,7 @@ def closed_loop(seed: int, effects, episodes: int, rng, steps: int = 60) -> Reco
                 row = e.sense(t, row, rng)
             late.append(_finish(row))
             seen = late[0]                       # delay samples ago (the first, at the start)
-            direction, power = network.act(weights, seen[:, None].astype(np.float32))
+            direction, power = network.act(weights, seen[None, :].astype(np.float32))
             d, p = int(direction[0]), int(power[0])
             cols['episode'].append(ep)
             cols['step'].append(step)

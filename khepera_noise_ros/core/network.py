@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .khepera import DARK, FRONT
+from .khepera import DARK, FRONT, SENSORS
 
 INPUTS, HIDDEN, OUTPUTS = FRONT, 2, 2
 GENES = INPUTS * HIDDEN + HIDDEN * OUTPUTS + HIDDEN + OUTPUTS   # 20
@@ -115,6 +115,10 @@ def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
 
 
 def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
+    if readings.ndim != 2 or readings.shape[1] < FRONT:
+        # einsum would broadcast an (8, 1) column silently into 8 one-sensor robots
+        raise ValueError(f'readings must be (B, {SENSORS}) or (B, {FRONT}), batch first; '
+                         f'got shape {readings.shape}')
     hidden = np.einsum('bi,ijb->jb', readings[:, :FRONT], w._w_reading)
     hidden += w._b_reading
     net = np.einsum('jb,jkb->kb', _logistic(hidden), w.w_ho)
