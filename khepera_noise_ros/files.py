@@ -58,9 +58,9 @@ def describe(exc: OSError) -> str:
 
 
 @contextlib.contextmanager
-def atomic_open(path, mode: str = 'w', **kwargs) -> Iterator:
+def atomic_open(path, mode: str = 'w', fsync: bool = True, **kwargs) -> Iterator:
     """``open(path, mode)`` into a temporary file beside ``path``, renamed into place when the
-    block ends without error (flushed and fsync'ed first); removed otherwise."""
+    block ends without error (flushed and, with ``fsync``, synced first); removed otherwise."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -70,8 +70,9 @@ def atomic_open(path, mode: str = 'w', **kwargs) -> Iterator:
     try:
         with os.fdopen(fd, mode, **kwargs) as f:
             yield f
-            f.flush()
-            os.fsync(f.fileno())
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)

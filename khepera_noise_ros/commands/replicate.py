@@ -14,11 +14,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import signal
 import sys
 import time
 from pathlib import Path
 
+from .. import lifeline
 from ..experiment import config as settings
 from ..experiment import report, stats_report
 from ..experiment.protocol import Backends, ConditionEpisodes, Experiment, batch_simulate, \
@@ -72,7 +72,7 @@ def run(args) -> int:
     print(stats_report.power_before_run(config, store))
     started, finished = time.monotonic(), False
     try:
-        with _terminate_as_interrupt(), open_backends(config, args.port) as backends, \
+        with lifeline.terminate_as_interrupt(), open_backends(config, args.port) as backends, \
                 Progress(enabled=not args.no_progress) as progress:
             experiment = Experiment(config, backends, store, progress)
             progress.start(experiment.episodes_left(), backends.seconds_per_episode)
@@ -106,22 +106,6 @@ def both_protocols(args) -> int:
         if code:
             return code
     return 0
-
-
-@contextlib.contextmanager
-def _terminate_as_interrupt():
-    """A plain ``kill`` stops the run like Ctrl-C, so it too saves its checkpoints."""
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-    try:
-        previous, installed = signal.signal(signal.SIGTERM, interrupt), True
-    except ValueError:              # not the main thread: leave signals alone
-        previous, installed = None, False
-    try:
-        yield
-    finally:
-        if installed:
-            signal.signal(signal.SIGTERM, previous)
 
 
 class Progress:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import yaml
 
+from .. import lifeline
 from ..experiment import config as settings
 from ..experiment import sweep
 from ..experiment.protocol import Backends, Experiment, chunked, chunked_trace, \
@@ -24,7 +25,7 @@ from ..experiment.protocol import Backends, Experiment, chunked, chunked_trace, 
 from ..experiment.store import Store
 from ..reality.khepera_robot import InProcessRobots, KheperaRobots
 from ..reality.world import EmulatedWorld
-from .replicate import Progress, _terminate_as_interrupt
+from .replicate import Progress
 
 SWEEP_ROBOTS = 200
 STORE_KEYS = ('format', 'config_hash', 'condition', 'trial', 'step')    # the store's own
@@ -89,7 +90,7 @@ def run(args) -> int:
     pts = sweep.points(spec)
     args.out.mkdir(parents=True, exist_ok=True)
     started, results = time.monotonic(), []
-    with _terminate_as_interrupt():
+    with lifeline.terminate_as_interrupt():
         first = None
         for i, point in enumerate(pts):
             config = sweep.point_config(base, point)

@@ -19,14 +19,12 @@ Layout under the output directory::
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import yaml
 
-from ..files import atomic_write_text, write_json
+from ..files import atomic_open, atomic_write_text, write_json
 
 UNIT_FORMAT = 'khepera-noise-replicate-unit/1'
 CHECKPOINT_FORMAT = 'khepera-noise-replicate-checkpoint/1'
@@ -135,15 +133,8 @@ def write_unit(path: Path, data: dict) -> None:
     without fsync: hundreds of fsyncs cost seconds on a busy disk, and a file that a
     power cut leaves empty or cut short is not valid JSON, which ``_read`` takes as not
     there, so the unit is simply computed again."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
-    try:
-        with os.fdopen(fd, 'w') as f:
-            json.dump(data, f, default=_listed)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_open(path, fsync=False) as f:
+        json.dump(data, f, default=_listed)
 
 
 def _listed(obj):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
-from .blocks import FACTORS, Blocks, Key, Stats, pack as _pack
+from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
@@ -41,7 +41,7 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
                                if heading_known else np.zeros(2))
         stratum.append(conditions.index(str(rec.condition[idx[0]])))
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
-    sums, layout = _pack(parts, len(stratum))
+    sums, layout = pack(parts, len(stratum))
     return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
                   sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
 

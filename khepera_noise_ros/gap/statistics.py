@@ -21,7 +21,7 @@ from scipy import sparse
 
 from ..recording import Recording
 from . import blocklength
-from .blocks import FACTORS, Blocks, Key, Stats, pack as _pack  # noqa: F401 (re-exported)
+from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 
 LAGS = (1, 3)                    # autocorrelation lags, in steps
@@ -142,7 +142,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb)
-    sums, layout = _pack(parts, nb)
+    sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
                   {'integer': integer})
 
