@@ -191,6 +191,12 @@ class HardwareBridge(LifecycleNodeMixin, RobotNode):
         """Stop the motors and close the ports before the node goes."""
         self.serving = False
         self.backend.close()
+        # rclpy leaves the lifecycle state machine, which holds the node, to the garbage
+        # collector; end it (after its services) first, as rclcpp's teardown does
+        for service in [s for s in self.services if s.srv_type.__module__.startswith(
+                'lifecycle_msgs')]:
+            self.destroy_service(service)
+        self._state_machine.destroy_when_not_in_use()
         super().destroy_node()
 
 
