@@ -269,7 +269,8 @@ def test_no_command_is_answered_twice_by_the_wrong_genomes(ros_context):
 
 def test_tagged_genomes_answer_their_episode_and_the_running_one_is_kept(ros_context):
     """Genomes on the topic answer only their episode (the parameter answers the others),
-    each is acknowledged, and genomes for other episodes never push out the running one."""
+    each is acknowledged, genomes for other episodes never push out the running one, and
+    light for an episode pushed out is dropped, not answered with the parameter."""
     from std_msgs.msg import Float64MultiArray, Int32
 
     from khepera_noise_ros.core import network
@@ -305,6 +306,12 @@ def test_tagged_genomes_answer_their_episode_and_the_running_one_is_kept(ros_con
         assert wait_for(lambda: len(acks) == 1 + 3 * TAGGED)
         np.testing.assert_array_equal(answer(7, 1), expected(tagged))          # still held
         assert sorted(ctrl._tagged) == [7] + list(range(100 + 2 * TAGGED, 100 + 3 * TAGGED))
+        # a pushed-out episode is not answered with the parameter's networks, though its
+        # batch fits them: those are not the genomes it was sent
+        probe.publish(protocol.LIGHT, protocol.pack_light(100, 0, readings))
+        assert wait_for(lambda: ctrl.dropped['forgotten'] == 1)
+        assert not any(b.episode == 100 for b in valid(probe.messages(CMD_TURN),
+                                                       protocol.unpack_cmd_turn))
     assert acks == [7] + list(range(100, 100 + 3 * TAGGED))
 
 

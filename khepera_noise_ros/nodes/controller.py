@@ -11,11 +11,15 @@ instead, tagged with the episode id: the light of that episode is answered
 with them, whatever the parameter holds, and each is acknowledged on
 ``genomes_loaded`` so that the manager starts the episode only once they are
 in.  The last ``TAGGED`` episodes' networks are kept, and always those of the
-episode running.
+episode running.  Light for an episode whose networks were pushed out by newer
+ones (a flood on the topic, or more managers than ``TAGGED``) is dropped as
+``forgotten``, never answered with the parameter's networks: the manager's
+stall check starts that episode again with its genomes.
 """
 from __future__ import annotations
 
 import sys
+from collections import deque
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -35,6 +39,7 @@ GENOMES = Spec('genomes', [], f'B genomes of {network.GENES} genes, flattened: o
                f'+-{network.MAX_GENE:g}.',
                type_=Parameter.Type.DOUBLE_ARRAY)
 TAGGED = 4          # episodes whose tagged genomes are kept (one runs at a time)
+FORGOTTEN = 256     # episode ids remembered as pushed out, so their light is not misanswered
 
 
 def genomes_from(value) -> np.ndarray:
@@ -61,6 +66,7 @@ class Controller(Node):
         self._weights = self._load(self.get_parameter(GENOMES.name).value)
         self._tagged: dict[int, network.Weights] = {}       # episode -> its networks
         self._running: int | None = None        # the episode of the last light answered
+        self._forgotten: deque[int] = deque(maxlen=FORGOTTEN)
         self._pub = self.create_publisher(Int32MultiArray, protocol.CMD_TURN, protocol.QOS)
         self._pub_loaded = self.create_publisher(Int32, protocol.GENOMES_LOADED, protocol.QOS)
         self.create_subscription(Float64MultiArray, protocol.LIGHT, self._on_light,
@@ -104,6 +110,7 @@ class Controller(Node):
         others = [e for e in self._tagged if e != self._running]      # oldest first
         for old in others[:max(0, len(others) - TAGGED)]:
             del self._tagged[old]
+            self._forgotten.append(old)
         self._pub_loaded.publish(Int32(data=episode))
 
     def _on_light(self, msg: bytes) -> None:
@@ -113,6 +120,12 @@ class Controller(Node):
         weights = self._tagged.get(batch.episode)
         if weights is not None:
             self._running = batch.episode
+        elif batch.episode in self._forgotten:
+            self.dropped.add('forgotten', f'light ({batch.episode}, {batch.step}): the genomes '
+                             f'of episode {batch.episode} were pushed out by {TAGGED} newer '
+                             f'sets on {protocol.GENOMES} (more managers than {TAGGED}, or a '
+                             f'flood?); its manager will start it again')
+            return
         else:
             weights = self._weights             # one snapshot: a set may swap it meanwhile
         robots = _networks(weights)
