@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
+from . import turnscatter
 from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 
@@ -16,7 +17,9 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
     conditions = rec.conditions()
     heading_known = bool(np.isfinite(rec.heading_deg).all())
     rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
-                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading')}
+                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading',
+                                             'scatter_n', 'scatter_xx', 'scatter_xy',
+                                             'scatter_yy', 'heading_band')}
     stratum = []
     for e in np.unique(rec.episode):
         idx = np.flatnonzero(rec.episode == e)
@@ -33,12 +36,17 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
         rows['phase_n'].append(onehot.sum(axis=0))
         rows['power'].append(rec.power[idx] @ onehot)
         rows['right'].append([(rec.direction[idx] > 0).sum()])
-        xtx, xty, xty_sensor = _turn_moments(r, u, steps, perturb_every)
+        xtx, xty, xty_sensor, scatter = _turn_moments(r, u, steps, perturb_every)
+        for name, value in scatter.items():
+            rows[name].append(value)
         rows['xtx'].append(xtx)
         rows['xty'].append(xty)
         rows['xty_sensor'].append(xty_sensor)
         rows['heading'].append(_heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
                                if heading_known else np.zeros(2))
+        rows['heading_band'].append(
+            turnscatter.heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
+            if heading_known else turnscatter.empty_heading())
         stratum.append(conditions.index(str(rec.condition[idx[0]])))
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
     sums, layout = pack(parts, len(stratum))
@@ -55,20 +63,18 @@ def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
 
 
 def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every: int):
-    """Moments of the regression of the next change in readings on u(t) and u(t-1).
+    """Moments of the regression of the next change in readings on u(t) and u(t-1), and
+    per power band those of its scatter (``gap.turnscatter``).
 
     Transitions into a perturbation step are left out: the knock, not the command,
     moves the heading there.
     """
     imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
-    ok = [j for j in range(1, len(steps) - 1)
-          if steps[j + 1] == steps[j] + 1 and steps[j - 1] == steps[j] - 1
-          and steps[j + 1] % perturb_every != 0]
-    ok = np.asarray(ok, np.int64)
-    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1) if ok.size else np.zeros((0, 3))
-    dy = imbalance[ok + 1] - imbalance[ok] if ok.size else np.zeros(0)
-    dr = r[ok + 1] - r[ok] if ok.size else np.zeros((0, 8))
-    return x.T @ x, x.T @ dy, x.T @ dr
+    ok = turnscatter.regression_rows(steps, perturb_every)
+    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
+    dy = imbalance[ok + 1] - imbalance[ok]
+    dr = r[ok + 1] - r[ok]
+    return x.T @ x, x.T @ dy, x.T @ dr, turnscatter.response_moments(r, u, ok)
 
 
 def _heading_moments(heading: np.ndarray, u: np.ndarray, steps: np.ndarray,
@@ -115,6 +121,9 @@ def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
             h = b.part(sums, 'heading')[:, s]
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 1] / h[:, 0])
+        more_keys, more_cols = turnscatter.scatter_stats(b, sums, s, c)
+        keys += more_keys
+        cols += more_cols
     return Stats(keys, np.stack(cols, axis=1))
 
 
