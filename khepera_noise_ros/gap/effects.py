@@ -260,7 +260,9 @@ class SaturationQuantization(_OnSensors):
 
 @dataclass(frozen=True)
 class ActuatorTurnError:
-    """A commanded rotation of x degrees turns x * scale + slip * |x| * N(0, 1) degrees.
+    """A commanded rotation of x degrees turns x * scale + slip * |x| * N(0, 1)
+    + creep * N(0, 1) degrees: ``creep`` (degrees, default 0) is a slip of a fixed size,
+    which turns the robot even at power 0.
 
     With ``knocks`` the task's heading knocks are scaled too: on a real robot (the
     hardware bridge) the knocks are turns made by the same wheels.
@@ -271,10 +273,15 @@ class ActuatorTurnError:
     scale: float = 1.0
     slip: float = 0.0
     knocks: bool = True
+    creep: float = 0.0
 
     def process(self, robots: int, channels: int, rng):
-        return lambda deg: deg * self.scale + self.slip * np.abs(deg) \
-            * rng.standard_normal(np.shape(deg))
+        def turn(deg):
+            out = deg * self.scale + self.slip * np.abs(deg) * rng.standard_normal(np.shape(deg))
+            if self.creep:       # drawn only when set: older effects keep their streams
+                out = out + self.creep * rng.standard_normal(np.shape(deg))
+            return out
+        return turn
 
     @property
     def location(self) -> list:
@@ -401,6 +408,9 @@ def _check(effect) -> None:
                                                      not 0 <= effect.dropout < 1):
         raise ValueError(f'saturation_quantization needs step > 0, low < high and '
                          f'0 <= dropout < 1, got '
+                         f'{parameters(effect)}')
+    if effect.name == 'actuator_turn_error' and (effect.slip < 0 or effect.creep < 0):
+        raise ValueError(f'actuator_turn_error needs slip >= 0 and creep >= 0, got '
                          f'{parameters(effect)}')
     if effect.name == 'empirical_noise':
         n = len(effect.sensors)

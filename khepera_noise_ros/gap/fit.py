@@ -14,7 +14,7 @@ Fingerprints (what the statistics of ``gap.statistics`` show):
   intensity_dependent_noise  extra shared spread that grows steeply with the level
   temporal_drift             extra autocorrelation; level offsets no fixed calibration makes
   sensor_latency             a step response that lags; turn responses moved to lag 1
-  actuator_turn_error        the readings' response to a turn command scaled or blurred
+  actuator_turn_error        the response to a turn scaled, or scattered (gap.fitturn)
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import limits, spreadlaw
+from . import fitturn, limits, spreadlaw
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -411,25 +411,8 @@ def _best_delay(target: Target, sensors, delays, kinds=('stationary',)) -> int:
 # --- actuator_turn_error ---------------------------------------------------------------
 
 def actuator(target: Target, c: Comparison) -> Candidate:
-    name = fx.ActuatorTurnError.name
-    rows = [(r, s) for k, r, s, se, z in _rows(c, 'turn_response') if k.part == 'lag 0']
-    if not rows:
-        return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
-    families = ('turn_response', 'sensor_turn_response', 'turn_size')
-    if not any(abs(z) > Z_DETECT for family in families for *_, z in _rows(c, family)):
-        return Candidate(name, None, 'the readings respond to turns as simulated')
-    # recorded headings measure the turn itself; else the readings' response to it
-    size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
-    real, sim = np.mean(size if size else rows, axis=0)
-    scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
-
-    def objective(scale, slip):
-        return target.objective([fx.ActuatorTurnError(scale, slip)], ('closed_loop',))
-    scale = _golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
-    slip = min((0.0, 0.1, 0.2, 0.35), key=lambda x: objective(scale, x))
-    effect = fx.ActuatorTurnError(round(scale, 4), slip)
-    return Candidate(name, effect, f'turn response {real / sim:.2f} times the simulated'
-                     if abs(sim) > 1e-9 else 'turn response differs')
+    """``gap.fitturn``: scale, random slip and creep of the turns."""
+    return fitturn.actuator(target, c)
 
 
 FITTERS = {fx.SensorGainOffset.name: gain_offset, fx.SaturationQuantization.name: saturation,

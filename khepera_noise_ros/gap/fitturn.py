@@ -1,0 +1,80 @@
+"""Fitting ``actuator_turn_error``: a turn's scale, its random slip and its creep.
+
+Fingerprints: the readings' response to a turn scaled (``turn_response``,
+``sensor_turn_response``), the turn size itself where headings are recorded
+(``turn_size``), and, for a zero-mean random error, which leaves those alone, the
+scatter of the turn (``turn_scatter``, ``turn_size_scatter``, by power band;
+``gap.turnscatter``).  Scale and slip are fitted jointly by golden-section search,
+one after the other and the scale once more; a creep (a slip of fixed size) only
+where the power-0 band shows scatter.  Scale 1 is kept when it fits as well.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import effects as fx
+from . import fit
+from .target import Target
+from .turnscatter import BANDS, band_label
+from .where import Comparison
+
+FAMILIES = ('turn_response', 'sensor_turn_response', 'turn_size', 'turn_scatter',
+            'turn_size_scatter')
+SLIP_MAX = 0.8           # sd of the slip per degree turned searched over
+CREEP_MAX = 10.0         # degrees per step searched over
+KINDS = ('closed_loop',)
+SAME = 0.02              # relative objective within which the simpler effect is kept
+
+
+def actuator(target: Target, c: Comparison) -> fit.Candidate:
+    name = fx.ActuatorTurnError.name
+    rows = [(r, s) for k, r, s, se, z in fit._rows(c, 'turn_response') if k.part == 'lag 0']
+    if not rows:
+        return fit.Candidate(name, None, 'no closed-loop data: turns cannot be checked')
+    flagged = {f: [k for k, *_, z in fit._rows(c, f) if abs(z) > fit.Z_DETECT]
+               for f in FAMILIES}
+    if not any(flagged.values()):
+        return fit.Candidate(name, None, 'the readings respond to turns as simulated')
+    # recorded headings measure the turn itself; else the readings' response to it
+    size = [(r, s) for k, r, s, se, z in fit._rows(c, 'turn_size')]
+    real, sim = np.mean(size if size else rows, axis=0)
+    scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
+    still = band_label(BANDS[0])
+    creep_seen = any(k.part == still for f in ('turn_scatter', 'turn_size_scatter')
+                     for k in flagged[f])
+
+    def objective(scale, slip, creep=0.0):
+        return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
+    scale = fit._golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
+    slip = fit._golden(lambda x: objective(scale, x), 0.0, SLIP_MAX, 9)
+    scale = fit._golden(lambda x: objective(x, slip), scale * 0.9, scale * 1.1, 6)
+    creep = fit._golden(lambda x: objective(scale, slip, x), 0.0, CREEP_MAX, 7) \
+        if creep_seen else 0.0
+    scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4), round(creep, 3))
+    effect = fx.ActuatorTurnError(scale, slip, creep=creep)
+    return fit.Candidate(name, effect, _note(real, sim, flagged, effect))
+
+
+def _simplest(objective, scale: float, slip: float, creep: float) -> tuple:
+    """The fitted parameters, with each of scale 1, slip 0, creep 0 taken instead where
+    the objective stays within ``SAME`` of the fitted one (fewer departures from the
+    simulator for the same fit)."""
+    best = objective(scale, slip, creep)
+    out = [scale, slip, creep]
+    for i, plain in ((0, 1.0), (1, 0.0), (2, 0.0)):
+        if out[i] == plain:
+            continue
+        trial = list(out)
+        trial[i] = plain
+        if objective(*trial) <= best + SAME * abs(best):
+            out = trial
+    return tuple(out)
+
+
+def _note(real: float, sim: float, flagged: dict, effect) -> str:
+    ratio = f'turn response {real / sim:.2f} times the simulated' if abs(sim) > 1e-9 \
+        else 'turn response differs'
+    scatter = [k.part for f in ('turn_scatter', 'turn_size_scatter') for k in flagged[f]]
+    if scatter:
+        ratio += f'; turns scatter more than simulated ({", ".join(sorted(set(scatter)))})'
+    return f'{ratio}: scale {effect.scale:g}, slip {effect.slip:g}, creep {effect.creep:g} deg'
