@@ -59,8 +59,28 @@ def test_a_scale_error_alone_is_still_found_with_its_scale():
 
 @pytest.mark.parametrize('headings', [True, False], ids=['headings', 'no_headings'])
 def test_a_clean_closed_loop_is_answered_none(headings):
+    """The scatter is compared (and found as simulated), and no turn error is named."""
     result = diagnose.diagnose([_closed_loop([], headings, seed=7)], OPTIONS)
     assert result.top_effect == 'none', result.effects[:2]
+    c = result.held_out_before
+    scatter = [(k.family, p) for k, p in zip(c.keys, c.p_holm) if k.family.endswith('scatter')]
+    assert {f for f, _ in scatter} == (
+        {'turn_scatter', 'turn_size_scatter'} if headings else {'turn_scatter'})
+    assert all(p >= 0.01 for _, p in scatter), scatter
+
+
+def test_a_slip_and_a_sensor_effect_are_kept_together():
+    """Stationary and closed-loop recordings of a robot whose sensor s2 reads with a gain
+    error and whose wheels slip: the slip's discrepancy lies in the closed loop alone,
+    beside a larger stationary one, and the compound keeps both."""
+    hidden = [fx.SensorGainOffset((2,), (1.15,), (-10.0,)), fx.ActuatorTurnError(1.0, SLIP)]
+    recs = [recorded(stationary_protocol(samples=20), hidden[:1], seed=5),
+            _closed_loop(hidden, False)]
+    result = diagnose.diagnose(recs, OPTIONS)
+    chosen = result.to_json()['compound']['chosen']
+    assert {c['name'] for c in chosen} == {'sensor_gain_offset', 'actuator_turn_error'}, chosen
+    turn = next(c for c in chosen if c['name'] == 'actuator_turn_error')
+    assert turn['parameters']['slip'] == pytest.approx(SLIP, abs=SLIP_TOLERANCE)
 
 
 def test_a_creep_at_power_0_is_its_own_parameter():

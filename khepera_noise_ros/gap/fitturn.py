@@ -18,8 +18,8 @@ from .target import Target
 from .turnscatter import BANDS, band_label
 from .where import Comparison
 
-FAMILIES = ('turn_response', 'sensor_turn_response', 'turn_size', 'turn_scatter',
-            'turn_size_scatter')
+SCATTER = ('turn_scatter', 'turn_size_scatter')
+FAMILIES = ('turn_response', 'sensor_turn_response', 'turn_size') + SCATTER
 SLIP_MAX = 0.8           # sd of the slip per degree turned searched over
 CREEP_MAX = 10.0         # degrees per step searched over
 KINDS = ('closed_loop',)
@@ -31,8 +31,9 @@ def actuator(target: Target, c: Comparison) -> fit.Candidate:
     rows = [(r, s) for k, r, s, se, z in fit._rows(c, 'turn_response') if k.part == 'lag 0']
     if not rows:
         return fit.Candidate(name, None, 'no closed-loop data: turns cannot be checked')
-    flagged = {f: [k for k, *_, z in fit._rows(c, f) if abs(z) > fit.Z_DETECT]
-               for f in FAMILIES}
+    # a random error only adds scatter: less than simulated is no fingerprint of it
+    flagged = {f: [k for k, *_, z in fit._rows(c, f)
+                   if (z if f in SCATTER else abs(z)) > fit.Z_DETECT] for f in FAMILIES}
     if not any(flagged.values()):
         return fit.Candidate(name, None, 'the readings respond to turns as simulated')
     # recorded headings measure the turn itself; else the readings' response to it
@@ -40,7 +41,7 @@ def actuator(target: Target, c: Comparison) -> fit.Candidate:
     real, sim = np.mean(size if size else rows, axis=0)
     scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
     still = band_label(BANDS[0])
-    creep_seen = any(k.part == still for f in ('turn_scatter', 'turn_size_scatter')
+    creep_seen = any(k.part == still for f in SCATTER
                      for k in flagged[f])
 
     def objective(scale, slip, creep=0.0):
@@ -74,7 +75,7 @@ def _simplest(objective, scale: float, slip: float, creep: float) -> tuple:
 def _note(real: float, sim: float, flagged: dict, effect) -> str:
     ratio = f'turn response {real / sim:.2f} times the simulated' if abs(sim) > 1e-9 \
         else 'turn response differs'
-    scatter = [k.part for f in ('turn_scatter', 'turn_size_scatter') for k in flagged[f]]
+    scatter = [k.part for f in SCATTER for k in flagged[f]]
     if scatter:
         ratio += f'; turns scatter more than simulated ({", ".join(sorted(set(scatter)))})'
     return f'{ratio}: scale {effect.scale:g}, slip {effect.slip:g}, creep {effect.creep:g} deg'
