@@ -116,3 +116,26 @@ def test_scatter_by_band_measures_a_known_heading_scatter():
     rms = np.sqrt((band[3] - 2 * k * band[2] + k * k * band[1]) / band[0])
     expected = SLIP * CONFIG.world.deg_per_power * np.sqrt(band[1] / band[0])
     assert rms == pytest.approx(expected, rel=0.15)
+
+
+# a controller that often stands still (power 0 in about 45% of steps, else 1-3)
+STILL_GENOME = [-2.3, -1.5, 1.8, -0.3, 2.3, 0.6, 1.7, -1.9, -1.1, -0.7, 0.0, -0.2, 1.9, -2.0,
+                2.1, 2.3, -2.5, -2.9, -1.2, -0.6]
+
+
+@pytest.mark.parametrize('headings', [True, False], ids=['headings', 'no_headings'])
+def test_a_creep_at_power_0_is_found(headings):
+    protocol = closed_loop_protocol(16)
+    protocol.manifest = dict(protocol.manifest, genome=STILL_GENOME)
+    rec = replay.replay(protocol, CONFIG, [fx.ActuatorTurnError(1.0, 0.0, creep=2.0)], seed=6)
+    rec.manifest = dict(protocol.manifest, source='emulator')
+    if not headings:
+        rec.heading_deg[:] = np.nan
+    result = diagnose.diagnose([rec], OPTIONS)
+    assert result.top_effect == 'actuator_turn_error', result.effects[:2]
+    p = result.effects[0]['parameters']
+    if headings:              # the turn itself is measured: the creep is sized
+        assert p['creep'] == pytest.approx(2.0, abs=0.4)
+        assert p['slip'] < 0.1 and p['scale'] == pytest.approx(1.0, abs=0.1)
+    else:
+        assert p['creep'] > 0.5

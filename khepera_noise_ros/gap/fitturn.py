@@ -4,9 +4,9 @@ Fingerprints: the readings' response to a turn scaled (``turn_response``,
 ``sensor_turn_response``), the turn size itself where headings are recorded
 (``turn_size``), and, for a zero-mean random error, which leaves those alone, the
 scatter of the turn (``turn_scatter``, ``turn_size_scatter``, by power band;
-``gap.turnscatter``).  Scale and slip are fitted jointly by golden-section search,
-one after the other and the scale once more; a creep (a slip of fixed size) only
-where the power-0 band shows scatter.  Scale 1 is kept when it fits as well.
+``gap.turnscatter``).  Scale, slip and creep (a slip of fixed size, fitted only
+where the power-0 band shows scatter) are fitted jointly by golden-section search,
+one after the other, the scale and creep once more.  Scale 1 is kept when it fits as well.
 """
 from __future__ import annotations
 
@@ -46,14 +46,20 @@ def actuator(target: Target, c: Comparison) -> fit.Candidate:
 
     def objective(scale, slip, creep=0.0):
         return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
+    # the creep first where power 0 shows it (there the slip cannot act), then the
+    # slip given it, the scale once more, and the creep given both
     scale = fit._golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
-    slip = fit._golden(lambda x: objective(scale, x), 0.0, SLIP_MAX, 9)
-    scale = fit._golden(lambda x: objective(x, slip), scale * 0.9, scale * 1.1, 6)
-    creep = fit._golden(lambda x: objective(scale, slip, x), 0.0, CREEP_MAX, 7) \
-        if creep_seen else 0.0
+    creep = _creep(lambda x: objective(scale, 0.0, x)) if creep_seen else 0.0
+    slip = fit._golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
+    scale = fit._golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
+    creep = _creep(lambda x: objective(scale, slip, x)) if creep_seen else 0.0
     scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4), round(creep, 3))
     effect = fx.ActuatorTurnError(scale, slip, creep=creep)
     return fit.Candidate(name, effect, _note(real, sim, flagged, effect))
+
+
+def _creep(f) -> float:
+    return fit._golden(f, 0.0, CREEP_MAX, 7)
 
 
 def _simplest(objective, scale: float, slip: float, creep: float) -> tuple:
