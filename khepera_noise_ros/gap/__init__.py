@@ -3,6 +3,7 @@ effect explains it, and how far adding that effect shrinks the gap on held-out d
 
   statistics  block sums of a recording and every compared statistic, bootstrapped
   closedloop  the closed-loop statistics (fitness factors, turn responses)
+  turnscatter the turn's scatter: what a zero-mean random turn error changes
   blocklength the one block-length rule of the project's block bootstraps
   allan       Allan deviation of the residuals: fast against slow, per sensor and shared
   where       real against simulated statistics: z, Holm, discrepancy, localisation
@@ -11,6 +12,7 @@ effect explains it, and how far adding that effect shrinks the gap on held-out d
   effects     simulator-side models of the vocabulary's effects, as a JSON parameter
   target      real recordings held against the simulator, for fitting and scoring
   fit         locating and fitting each effect
+  fitturn     fitting the turn error: scale, random slip, creep
   spreadlaw   laws of the noise's spread against the level
   limits      dropouts: isolated readings stuck at zero or a limit
   compound    forward selection of a set of effects, each fitted jointly
