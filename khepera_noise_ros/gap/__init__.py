@@ -13,6 +13,7 @@ effect explains it, and how far adding that effect shrinks the gap on held-out d
   target      real recordings held against the simulator, for fitting and scoring
   fit         locating and fitting each effect
   fitturn     fitting the turn error: scale, random slip, creep
+  fitbase     what the fitters share (Candidate, detection threshold, golden search)
   spreadlaw   laws of the noise's spread against the level
   limits      dropouts: isolated readings stuck at zero or a limit
   compound    forward selection of a set of effects, each fitted jointly

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats as sps
@@ -29,48 +28,19 @@ from scipy.optimize import minimize
 from ..recording import reading_range
 from . import effects as fx
 from . import fitturn, limits, spreadlaw
+from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
+from .fitbase import golden as _golden, rows as _rows
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
 from .where import ALPHA, Comparison, holm
 
-Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 
 
-@dataclass
-class Candidate:
-    name: str
-    effect: object | None     # None: nothing to add (see ``note``)
-    note: str
-
-
-def _rows(c: Comparison, family: str):
-    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
-            if k.family == family]
-
-
 def _channels(target: Target) -> list[int]:
     return list(target.recordings[0].channels_used)
-
-
-def _golden(f, lo: float, hi: float, evaluations: int) -> float:
-    """Minimiser of f on [lo, hi] by golden-section search."""
-    g = (math.sqrt(5) - 1) / 2
-    a, b = lo, hi
-    c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = f(c), f(d)
-    for _ in range(max(0, evaluations - 2)):
-        if fc <= fd:
-            b, d, fd = d, c, fc
-            c = b - g * (b - a)
-            fc = f(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + g * (b - a)
-            fd = f(d)
-    return c if fc <= fd else d
 
 
 # --- sensor_gain_offset ----------------------------------------------------------------

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import effects as fx
-from . import fit
+from .fitbase import Z_DETECT, Candidate, golden, rows
 from .target import Target
 from .turnscatter import BANDS, band_label
 from .where import Comparison
@@ -26,19 +26,19 @@ KINDS = ('closed_loop',)
 SAME = 0.02              # relative objective within which the simpler effect is kept
 
 
-def actuator(target: Target, c: Comparison) -> fit.Candidate:
+def actuator(target: Target, c: Comparison) -> Candidate:
     name = fx.ActuatorTurnError.name
-    rows = [(r, s) for k, r, s, se, z in fit._rows(c, 'turn_response') if k.part == 'lag 0']
-    if not rows:
-        return fit.Candidate(name, None, 'no closed-loop data: turns cannot be checked')
+    response = [(r, s) for k, r, s, se, z in rows(c, 'turn_response') if k.part == 'lag 0']
+    if not response:
+        return Candidate(name, None, 'no closed-loop data: turns cannot be checked')
     # a random error only adds scatter: less than simulated is no fingerprint of it
-    flagged = {f: [k for k, *_, z in fit._rows(c, f)
-                   if (z if f in SCATTER else abs(z)) > fit.Z_DETECT] for f in FAMILIES}
+    flagged = {f: [k for k, *_, z in rows(c, f)
+                   if (z if f in SCATTER else abs(z)) > Z_DETECT] for f in FAMILIES}
     if not any(flagged.values()):
-        return fit.Candidate(name, None, 'the readings respond to turns as simulated')
+        return Candidate(name, None, 'the readings respond to turns as simulated')
     # recorded headings measure the turn itself; else the readings' response to it
-    size = [(r, s) for k, r, s, se, z in fit._rows(c, 'turn_size')]
-    real, sim = np.mean(size if size else rows, axis=0)
+    size = [(r, s) for k, r, s, se, z in rows(c, 'turn_size')]
+    real, sim = np.mean(size if size else response, axis=0)
     scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
     still = band_label(BANDS[0])
     creep_seen = any(k.part == still for f in SCATTER
@@ -48,18 +48,18 @@ def actuator(target: Target, c: Comparison) -> fit.Candidate:
         return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
     # the creep first where power 0 shows it (there the slip cannot act), then the
     # slip given it, the scale once more, and the creep given both
-    scale = fit._golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
+    scale = golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
     creep = _creep(lambda x: objective(scale, 0.0, x)) if creep_seen else 0.0
-    slip = fit._golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
-    scale = fit._golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
+    slip = golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
+    scale = golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
     creep = _creep(lambda x: objective(scale, slip, x)) if creep_seen else 0.0
     scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4), round(creep, 3))
     effect = fx.ActuatorTurnError(scale, slip, creep=creep)
-    return fit.Candidate(name, effect, _note(real, sim, flagged, effect))
+    return Candidate(name, effect, _note(real, sim, flagged, effect))
 
 
 def _creep(f) -> float:
-    return fit._golden(f, 0.0, CREEP_MAX, 7)
+    return golden(f, 0.0, CREEP_MAX, 7)
 
 
 def _simplest(objective, scale: float, slip: float, creep: float) -> tuple:

@@ -1,0 +1,42 @@
+"""What every effect's fitter shares: the ``Candidate`` it returns, the detection
+threshold, a comparison's rows of one family, and a golden-section search.  Its own
+module so that fitters kept in modules of their own (``gap.fitturn``) need not import
+``gap.fit``, which registers them."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .where import Comparison
+
+Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
+
+
+@dataclass
+class Candidate:
+    name: str
+    effect: object | None     # None: nothing to add (see ``note``)
+    note: str
+
+
+def rows(c: Comparison, family: str):
+    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
+            if k.family == family]
+
+
+def golden(f, lo: float, hi: float, evaluations: int) -> float:
+    """Minimiser of f on [lo, hi] by golden-section search."""
+    g = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(max(0, evaluations - 2)):
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+    return c if fc <= fd else d
