@@ -153,7 +153,8 @@ def _part(c, closed: bool) -> float:
 
 
 STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
-              'spread_vs_level', 'step_response', 'mode_share', 'granularity'}
+              'spread_vs_level', 'step_response', 'mode_share', 'granularity',
+              'pileup'}
 
 
 def _backfit(a: Target, chosen: list) -> list:

@@ -9,7 +9,8 @@ fingerprint, or has no data that could show one, returns no effect and says why.
 
 Fingerprints (what the statistics of ``gap.statistics`` show):
   sensor_gain_offset         per-sensor levels off, linearly in the level
-  saturation_quantization    readings piled up at a limit the simulator exceeds; a value grid
+  saturation_quantization    readings piled up at a limit the simulator exceeds (gap.pileup);
+                             a value grid; dropouts
   correlated_noise           pairs more correlated than simulated (clustered into groups)
   intensity_dependent_noise  extra shared spread that grows steeply with the level
   temporal_drift             extra autocorrelation; level offsets no fixed calibration makes
@@ -28,7 +29,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import limits, spreadlaw
+from . import limits, pileup, spreadlaw
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -106,15 +107,13 @@ def saturation(target: Target, c: Comparison) -> Candidate:
     real = np.concatenate([r.readings for r in target.recordings])
     sim = np.concatenate([r.readings for r in target.simulate()])
     rec = target.recordings[0]
-    low, high, grid = {}, {}, {}
+    found = pileup.limits(real, sim, rec.channels_used, reading_range(rec.manifest, rec.channels))
+    # the limit holding most readings at each end, with the sensors piled up there
+    low, high = (pileup.strongest(found, end) for end in (0, 1))
+    grid = {}
     for sensor in rec.channels_used:
         x, y = real[:, sensor], sim[:, sensor]
         x, y = x[np.isfinite(x)], y[np.isfinite(y)]
-        ends = _clipped_ends(x, y, reading_range(rec.manifest, rec.channels))
-        if ends[0] is not None:
-            low[sensor] = ends[0]
-        if ends[1] is not None:
-            high[sensor] = ends[1]
         lattice = _grid(x[(x > x.min()) & (x < x.max())])
         # closed-loop statistics have no granularity: there the simulator's own readings
         # not lying on the real lattice is the evidence
@@ -138,39 +137,22 @@ def saturation(target: Target, c: Comparison) -> Candidate:
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
-            sensors = set(grid) | (set(low) if use_low else set()) | \
-                (set(high) if use_high else set()) | set(lost)
+            sensors = set(grid) | (set(low['sensors']) if use_low else set()) | \
+                (set(high['sensors']) if use_high else set()) | set(lost)
             if sensors:
                 options.append(fx.SaturationQuantization(
                     tuple(sorted(sensors)),
-                    low=float(np.median(list(low.values()))) if use_low else 0.0,
-                    high=float(np.median(list(high.values()))) if use_high else ANCHOR,
+                    low=low['value'] if use_low else 0.0,
+                    high=high['value'] if use_high else ANCHOR,
                     step=float(step), origin=float(origin), **drop))
     kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
     effect = min(options, key=lambda e: target.objective([e], kinds))
-    what = [w for w, found in (('clipped below', effect.low > 0),
-                               ('clipped above', effect.high < ANCHOR),
+    what = [w for w, found in ((f'clipped below at {effect.low:g}', effect.low > 0),
+                               (f'clipped above at {effect.high:g}', effect.high < ANCHOR),
                                ('on a grid', effect.step > 1),
                                (f'dropping out to {effect.dropout_value:g} at rate '
                                 f'{effect.dropout:.2%}', effect.dropout > 0)) if found]
     return Candidate(name, effect, f'{_names(effect.sensors)} {" and ".join(what)}')
-
-
-def _clipped_ends(real: np.ndarray, sim: np.ndarray, limits) -> tuple:
-    """(low, high) where a sensor's readings are held at a limit: they pile up on their
-    extreme value (0.5% of them, and twice as many as on the next value in), while 0.5%
-    of the simulated ones lie beyond it.  Merely narrower noise has no pile-up; a limit
-    of the reading range itself is modelled and does not count."""
-    values, counts = np.unique(real, return_counts=True)
-    if values.size < 2:
-        return None, None
-    out = []
-    for i, j, beyond, limit in ((0, 1, sim < values[0], limits[0]),
-                                (-1, -2, sim > values[-1], limits[1])):
-        held = counts[i] >= 0.005 * real.size and counts[i] >= 2 * counts[j] \
-            and np.mean(beyond) >= 0.005 and values[i] != limit
-        out.append(float(values[i]) if held else None)
-    return tuple(out)
 
 
 def _grid(x: np.ndarray) -> tuple[int, int]:
