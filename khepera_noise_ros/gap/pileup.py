@@ -13,11 +13,10 @@ limit shared by all sensors is found even when each touches few readings.
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 ENDS = ('at the lowest reading', 'at the highest reading')
+EDGE = 0.002        # the pile statistic's end: the outermost value this share of readings hold
 MIN_SHARE = 0.002   # the pile must exceed the next value inward by this share of the readings
 Z = 1.0             # and by this many Poisson sds;
 EXPECTED = 5.0      # the simulator puts this many readings beyond the value (none are real:
@@ -26,17 +25,29 @@ HELD = 0.5          # the real pile holds this share of what the simulator puts 
 
 
 def edge_hits(x: np.ndarray) -> np.ndarray:
-    """(N, C, 2) float32: 1 where a sample is at its channel's lowest (highest) value; summed
-    and divided by N, the share of readings held at each end (a smooth tail holds a
-    share of order 1/N there, a limit the share it clips)."""
+    """(N, C, 2) float32: 1 where a sample is at its channel's lowest (highest) value held by
+    at least ``EDGE`` of the readings.  Summed and divided by N, the share held at each
+    end: a limit holds the share it clips, a smooth tail about ``EDGE``; a few stray
+    readings beyond a pile do not move it."""
     out = np.zeros(x.shape + (2,), np.float32)
-    if x.size == 0:
-        return out
-    with warnings.catch_warnings():
-        warnings.simplefilter('ignore', RuntimeWarning)     # an all-NaN channel has no end
-        for end, pick in enumerate((np.nanmin, np.nanmax)):
-            out[..., end] = x == pick(x, axis=0)
+    for k in range(x.shape[1]):
+        col = x[:, k]
+        values, counts = _histogram(col[np.isfinite(col)])
+        held = values[counts >= max(2.0, EDGE * counts.sum())]
+        if held.size:
+            out[:, k, 0] = col == held[0]
+            out[:, k, 1] = col == held[-1]
     return out
+
+
+def _histogram(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(values, counts) of ``x``; by counting when the readings are small integers."""
+    if x.size and np.all(x == np.round(x)) and np.ptp(x) < 1e5:
+        low = x.min()
+        counts = np.bincount((x - low).astype(np.int64))
+        present = np.flatnonzero(counts)
+        return present + low, counts[present]
+    return np.unique(x, return_counts=True)
 
 
 def _ends(x: np.ndarray) -> list:
