@@ -16,7 +16,7 @@ from test_gap_support import CONDITIONS, CONFIG, recorded, stationary_protocol
 
 NORMAL = dataclasses.replace(CONFIG, noise=NoiseModel.independent_only(0.02, distribution='normal'))
 DIM = {k: v for k, v in CONDITIONS.items() if k != 'task'}   # no lamp-saturated readings
-PROTOCOL = stationary_protocol(samples=60, conditions=DIM)
+PROTOCOL = stationary_protocol(samples=150, conditions=DIM)      # 3,600 samples
 OPTIONS = diagnose.Options(config=NORMAL, replicates=40)
 
 

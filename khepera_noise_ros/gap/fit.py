@@ -146,7 +146,7 @@ def saturation(target: Target, c: Comparison) -> Candidate:
                     high=high['value'] if use_high else ANCHOR,
                     step=float(step), origin=float(origin), **drop))
     kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
-    effect = min(options, key=lambda e: target.objective([e], kinds))
+    effect = min(options, key=lambda e: target.objective([e], kinds, limits=True))
     what = [w for w, found in ((f'clipped below at {effect.low:g}', effect.low > 0),
                                (f'clipped above at {effect.high:g}', effect.high < ANCHOR),
                                ('on a grid', effect.step > 1),

@@ -3,40 +3,47 @@
 A floor or a ceiling inside the reading range (a converter that saturates just
 inside the range the light reaches) shows as a spike in a sensor's histogram at
 the edge of its distribution, with nothing beyond it, even when it touches only a
-few percent of the readings.  Two things together say so: the simulator, which has
-no limit there, puts readings beyond that value where the real sensor has none
-(a chance of about exp(-expected count)), and the real readings pile up at the
-value, above the count at the next value present inward, by about as many as the
-simulator puts beyond (merely narrower noise has no pile-up; a lattice or a
-smooth tail has no step at its end).  Sensors whose extremes sit at the same value are pooled, so a
-limit shared by all sensors is found even when each touches few readings.
+few percent of the readings.  Three things together say so: the simulator, which
+has no limit there, puts readings beyond the value where the real sensor has none
+(a chance of about exp(-expected count)); the real readings pile up at the value
+beyond the simulator's count there, by about as many as it puts beyond (merely
+narrower noise has no pile); and the pile stands above the next real value inward
+(a lattice has no step at its end).  Sensors whose extremes sit at the same value
+are pooled, so a limit shared by all sensors is found even when each touches few
+readings.  ``edge_hits`` gives the statistic the comparison sees.
 """
 from __future__ import annotations
 
 import numpy as np
 
 ENDS = ('at the lowest reading', 'at the highest reading')
-EDGE = 0.002        # the pile statistic's end: the outermost value this share of readings hold
-MIN_SHARE = 0.002   # the pile must exceed the next value inward by this share of the readings
-Z = 1.0             # and by this many Poisson sds;
+TAIL = 0.02         # the pile statistic looks for a pile in this share of readings at each end
+WIDTH = 1.0         # and counts the readings this close to it
+MIN_SHARE = 0.002   # the pile must exceed the simulator's count at the value by this share
+Z = 3.0             # and by this many Poisson sds, and the next real value inward;
 EXPECTED = 5.0      # the simulator puts this many readings beyond the value (none are real:
-#                   a chance of exp(-5) without a limit there;
+#                   a chance of exp(-5) without a limit there);
 HELD = 0.5          # the real pile holds this share of what the simulator puts at or beyond
 
 
 def edge_hits(x: np.ndarray) -> np.ndarray:
-    """(N, C, 2) float32: 1 where a sample is at its channel's lowest (highest) value held by
-    at least ``EDGE`` of the readings.  Summed and divided by N, the share held at each
-    end: a limit holds the share it clips, a smooth tail about ``EDGE``; a few stray
-    readings beyond a pile do not move it."""
+    """(N, C, 2) float32: 1 where a sample lies within ``WIDTH`` of its channel's low (high)
+    pile value, the most common reading among the outermost ``TAIL`` of them.  Summed and
+    divided by N: the share held at each end, the share a limit clips (plus a little),
+    a few times ``TAIL`` / (values in the tail) for a smooth tail.  The mode and the
+    window keep it steady when a slow change moves a pile or strays lie beyond it."""
     out = np.zeros(x.shape + (2,), np.float32)
     for k in range(x.shape[1]):
         col = x[:, k]
         values, counts = _histogram(col[np.isfinite(col)])
-        held = values[counts >= max(2.0, EDGE * counts.sum())]
-        if held.size:
-            out[:, k, 0] = col == held[0]
-            out[:, k, 1] = col == held[-1]
+        if values.size == 0:
+            continue
+        cum = np.cumsum(counts)
+        tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)
+        low = int(np.argmax(counts[:tail]))                          # first (outermost) max
+        high = values.size - 1 - int(np.argmax(counts[::-1][:tail]))
+        out[:, k, 0] = np.abs(col - values[low]) <= WIDTH
+        out[:, k, 1] = np.abs(col - values[high]) <= WIDTH
     return out
 
 
@@ -75,18 +82,19 @@ def limits(real: np.ndarray, sim: np.ndarray, sensors, reading_range) -> list[di
             value, at, inner = found
             beyond, held = (np.mean(y < value), np.mean(y <= value)) if end == 0 else \
                 (np.mean(y > value), np.mean(y >= value))
-            out[end].setdefault(value, []).append((sensor, at, inner, n, beyond, held))
+            out[end].setdefault(value, []).append((sensor, at, inner, n, beyond, held,
+                                                   np.mean(y == value)))
     found = []
     for end, by_value in enumerate(out):
         for value, rows in by_value.items():
             at = sum(r[1] for r in rows)
             inner = sum(r[2] for r in rows)
             n = sum(r[3] for r in rows)
-            share = (at - inner) / n
             expected = sum(r[3] * r[4] for r in rows)   # readings the simulator puts beyond
             held = sum(r[3] * r[5] for r in rows)       # ... at or beyond
-            if expected >= EXPECTED and at >= HELD * held and share >= MIN_SHARE \
-                    and at - inner > Z * np.sqrt(at + inner):
+            there = sum(r[3] * r[6] for r in rows)      # ... at the value
+            if expected >= EXPECTED and at >= HELD * held and at > inner \
+                    and at - there >= MIN_SHARE * n and at - there > Z * np.sqrt(there + 1.0):
                 found.append({'end': end, 'value': value, 'share': round(at / n, 5),
                               'sensors': tuple(sorted(r[0] for r in rows))})
     return found
