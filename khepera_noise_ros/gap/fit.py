@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import limits, pileup, spreadlaw
+from . import limits, pileup, spreadlaw, timesig
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -81,13 +81,17 @@ def gain_offset(target: Target, c: Comparison) -> Candidate:
     rows = _rows(c, 'level')
     if not rows or target.base == 'observed':
         return Candidate(name, None, 'no levels from the light model to compare')
+    change = timesig.of_target(target)
+    if change and change['significant']:      # a gain or offset is what the shared change
+        rows = timesig.steady_rows(rows, target, change)       # over time leaves
     sensors = sorted({k.sensors[0] for k, *_ in rows})
     chi = {s: sum(z * z for k, *_, z in rows if k.sensors[0] == s) for s in sensors}
     dof = {s: sum(1 for k, *_ in rows if k.sensors[0] == s) for s in sensors}
     p = holm(np.array([sps.chi2.sf(chi[s], dof[s]) for s in sensors]))
     located = [s for s, ps in zip(sensors, p) if ps < ALPHA]
     if not located:
-        return Candidate(name, None, 'no sensor\'s levels differ significantly')
+        return Candidate(name, None, 'no sensor\'s levels differ significantly' + (
+            ' beyond a shared change over time' if change and change['significant'] else ''))
     gains, offsets = [], []
     for s in located:
         real = np.array([r for k, r, *_ in rows if k.sensors[0] == s])
@@ -285,14 +289,18 @@ def drift(target: Target, c: Comparison) -> Candidate:
     name = fx.TemporalDrift.name
     acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')]
     sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
+    change = timesig.of_target(target)
+    moved = bool(change and change['significant'])   # levels moving together over time
+    if moved:
+        sensors = tuple(_channels(target))
     if not sensors:
         return Candidate(name, None, 'no extra autocorrelation over time and no level '
                                      'offsets beyond a fixed calibration')
     channels = _channels(target)
     evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
-    shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
-        > Z_DETECT
+    shared = moved or len(idx) > 1 and \
+        evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
                          if k.sensors[0] in sensors and k.part == f'lag {lag}'])
            for lag in (1, 3)}
@@ -303,6 +311,9 @@ def drift(target: Target, c: Comparison) -> Candidate:
     ratio = [spread[cond][s][0] / level[cond][s][1] for cond in spread for s in sensors
              if level.get(cond, {}).get(s, (0, 0))[1] > 0]
     sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
+    if moved:             # start from the shared factors' spread, slow over the runs
+        sd0 = max(sd0, change['sd'])
+        tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
 
     def make(x, shared=shared):
         # bounded so that the model can always run: a time constant of 0 has no AR(1)
@@ -319,7 +330,8 @@ def drift(target: Target, c: Comparison) -> Candidate:
         if target.objective([other]) < result.fun:
             effect = other
     kind = 'one shared wander' if effect.shared else 'a wander per sensor'
-    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind})')
+    how = f'; levels move together over time (sd {change["sd"]:.1%})' if moved else ''
+    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind}){how}')
 
 
 def _unexplained_levels(c: Comparison) -> tuple:
