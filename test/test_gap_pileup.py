@@ -14,9 +14,10 @@ from khepera_noise_ros.gap import diagnose, pileup
 from khepera_noise_ros.gap import effects as fx
 from test_gap_support import CONDITIONS, CONFIG, recorded, stationary_protocol
 
-NORMAL = dataclasses.replace(CONFIG, noise=NoiseModel.independent_only(0.02, distribution='normal'))
+NORMAL = dataclasses.replace(
+    CONFIG, noise=NoiseModel.independent_only(0.02, distribution='normal'))
 DIM = {k: v for k, v in CONDITIONS.items() if k != 'task'}   # no lamp-saturated readings
-PROTOCOL = stationary_protocol(samples=150, conditions=DIM)      # 3,600 samples
+PROTOCOL = stationary_protocol(samples=150, conditions=DIM)     # 3,600 samples
 OPTIONS = diagnose.Options(config=NORMAL, replicates=40)
 
 
@@ -27,7 +28,8 @@ def _clean():
 def _limit(x: np.ndarray, share: float, end: str) -> float:
     """The reading with ``share`` of ``x`` beyond it, at the dark or the bright end."""
     v = np.sort(x)
-    return float(v[int(np.ceil((1 - share) * v.size))] if end == 'high' else v[int(share * v.size)])
+    return float(v[int(np.ceil((1 - share) * v.size))] if end == 'high'
+                 else v[int(share * v.size)])
 
 
 def _saturation(result) -> dict:
