@@ -19,11 +19,14 @@ import numpy as np
 ENDS = ('at the lowest reading', 'at the highest reading')
 TAIL = 0.02         # the pile statistic looks for a pile in this share of readings at each end
 WIDTH = 1.0         # and counts the readings this close to it
-MIN_SHARE = 0.002   # the pile must exceed the simulator's count at the value by this share
-Z = 3.0             # and by this many Poisson sds, and the next real value inward;
-EXPECTED = 5.0      # the simulator puts this many readings beyond the value (none are real:
-#                   a chance of exp(-5) without a limit there);
-HELD = 0.5          # the real pile holds this share of what the simulator puts at or beyond
+# A limit at value v (see the module's docstring): the simulator puts EXPECTED readings
+# beyond v (none are real: a chance of exp(-5) without a limit); the real readings at v
+# are HELD of those the simulator puts at or beyond v, exceed its count at v by MIN_SHARE
+# of the readings and Z Poisson sds, and exceed the next real value inward.
+EXPECTED = 5.0
+HELD = 0.5
+MIN_SHARE = 0.002
+Z = 3.0
 
 
 def edge_hits(x: np.ndarray) -> np.ndarray:
@@ -95,7 +98,7 @@ def limits(real: np.ndarray, sim: np.ndarray, sensors, reading_range) -> list[di
             there = sum(r[3] * r[6] for r in rows)      # ... at the value
             if expected >= EXPECTED and at >= HELD * held and at > inner \
                     and at - there >= MIN_SHARE * n and at - there > Z * np.sqrt(there + 1.0):
-                found.append({'end': end, 'value': value, 'share': round(at / n, 5),
+                found.append({'end': end, 'value': value, 'share': round(float(at / n), 5),
                               'sensors': tuple(sorted(r[0] for r in rows))})
     return found
 
