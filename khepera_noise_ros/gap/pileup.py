@@ -38,26 +38,36 @@ def edge_hits(x: np.ndarray) -> np.ndarray:
     out = np.zeros(x.shape + (2,), np.float32)
     for k in range(x.shape[1]):
         col = x[:, k]
-        values, counts = _histogram(col[np.isfinite(col)])
-        if values.size == 0:
-            continue
-        cum = np.cumsum(counts)
-        tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)
-        low = int(np.argmax(counts[:tail]))                          # first (outermost) max
-        high = values.size - 1 - int(np.argmax(counts[::-1][:tail]))
-        out[:, k, 0] = np.abs(col - values[low]) <= WIDTH
-        out[:, k, 1] = np.abs(col - values[high]) <= WIDTH
+        for end, value in enumerate(_piles(col[np.isfinite(col)])):
+            if value is not None:
+                out[:, k, end] = np.abs(col - value) <= WIDTH
     return out
 
 
-def _histogram(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(values, counts) of ``x``; by counting when the readings are small integers."""
-    if x.size and np.all(x == np.round(x)) and np.ptp(x) < 1e5:
+def _piles(x: np.ndarray) -> tuple:
+    """(low, high) the most common value among the outermost ``TAIL`` of ``x`` at each end
+    (the outermost of equals): by counting when the readings are small integers, else
+    from the tails alone (a partition, not a sort)."""
+    if x.size == 0:
+        return None, None
+    if np.all(x == np.round(x)) and np.ptp(x) < 1e5:
         low = x.min()
         counts = np.bincount((x - low).astype(np.int64))
-        present = np.flatnonzero(counts)
-        return present + low, counts[present]
-    return np.unique(x, return_counts=True)
+        values = np.flatnonzero(counts)
+        counts = counts[values]
+        cum = np.cumsum(counts)
+        tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)
+        return (float(values[np.argmax(counts[:tail])] + low),
+                float(values[values.size - 1 - np.argmax(counts[::-1][:tail])] + low))
+    k = max(1, int(np.ceil(TAIL * x.size)))
+    if 2 * k >= x.size:
+        values, counts = np.unique(x, return_counts=True)
+        return float(values[np.argmax(counts)]), float(values[::-1][np.argmax(counts[::-1])])
+    part = np.partition(x, (k - 1, x.size - k))
+    lows, low_counts = np.unique(part[:k], return_counts=True)
+    highs, high_counts = np.unique(part[x.size - k:], return_counts=True)
+    return (float(lows[np.argmax(low_counts)]),
+            float(highs[::-1][np.argmax(high_counts[::-1])]))
 
 
 def _ends(x: np.ndarray) -> list:
