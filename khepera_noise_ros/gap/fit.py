@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import limits, spreadlaw
+from . import closednoise, limits, spreadlaw
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -193,8 +193,9 @@ def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndar
     whole residual) when there are none."""
     channels = _channels(target)
     real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
-    if not real:
-        return excess_evidence(c, channels)[0]
+    if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
+        z = excess_evidence(c, channels)[0]
+        return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z
     sim = target.simulate(kinds=('stationary',))
     return part_evidence(real, sim, channels, part)[0]
 
@@ -392,8 +393,12 @@ def latency(target: Target, c: Comparison) -> Candidate:
               if abs(z) > Z_DETECT}
     if not turned:
         return Candidate(name, None, 'readings follow heading changes at once')
-    sensors = tuple(sorted(turned))
-    delay = _best_delay(target, sensors, (1, 2, 3), kinds=('closed_loop',))
+    # sensors whose turn responses pass for simulated can lag too: their closed-loop
+    # noise residuals then take the earlier heading's light; the simulator judges
+    options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
+        k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
+    sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
+        target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)))))
     return Candidate(name, fx.SensorLatency(sensors, delay),
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 

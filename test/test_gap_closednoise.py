@@ -1,0 +1,89 @@
+"""Closed-loop noise statistics (``gap.closednoise``): sensor effects seen while the
+robot turns, in recordings that keep their headings (a tracked robot).
+
+The 'robot' is the closed-loop simulator with hidden effects; the diagnosis sees only
+the recording and the plain simulator's configuration.
+"""
+import numpy as np
+
+from khepera_noise_ros.gap import closednoise, diagnose, replay
+from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.gap.target import Target
+from test_gap_support import CONFIG, closed_loop_protocol
+
+OPTIONS = diagnose.Options(config=CONFIG, replicates=60)
+PAIR = (1, 6)                       # not adjacent
+
+
+def tracked(effects, seed=5, episodes=24):
+    """A closed-loop recording with its headings kept."""
+    rec = replay.replay(closed_loop_protocol(episodes), CONFIG, effects, seed=seed)
+    rec.manifest = dict(rec.manifest, source='emulator')
+    assert np.isfinite(rec.heading_deg).all()
+    return rec
+
+
+def _z(c, family, sensors):
+    return [z for k, z in zip(c.keys, c.z) if k.family == family and k.sensors == sensors]
+
+
+def test_fast_noise_shared_by_a_pair_shows_and_is_fitted_with_that_pair():
+    rec = tracked([fx.CorrelatedNoise((PAIR,), 0.03)])
+    c = Target([rec], CONFIG, 1, replicates=60).compare()
+    corr = _z(c, 'loop_residual_correlation', PAIR)
+    assert corr and corr[0] > 6, corr
+    others = [abs(z) for k, z in zip(c.keys, c.z)
+              if k.family == 'loop_residual_correlation' and k.sensors != PAIR]
+    assert max(others) < 6 * 1.5 and corr[0] > max(others)
+    result = diagnose.diagnose([rec], OPTIONS)
+    assert result.top_effect == 'correlated_noise', result.effects[:2]
+    p = result.effects[0]['parameters']
+    assert [sorted(g) for g in p['groups']] == [list(PAIR)]
+    assert result.effects[0]['heldout_reduction'] > 0.8
+
+
+def test_latency_and_a_shared_pair_are_both_chosen():
+    rec = tracked([fx.SensorLatency(tuple(range(8)), 1), fx.CorrelatedNoise((PAIR,), 0.03)])
+    result = diagnose.diagnose([rec], OPTIONS)
+    chosen = result.to_json()['compound']['chosen']
+    names = [c['name'] for c in chosen]
+    assert set(names) >= {'sensor_latency', 'correlated_noise'}, (names, result.effects[:3])
+    groups = next(c for c in chosen if c['name'] == 'correlated_noise')['parameters']['groups']
+    assert any(set(PAIR) <= set(g) for g in groups), groups
+
+
+def test_a_clean_recording_gives_no_significant_gap():
+    for seed in (5, 8):
+        rec = tracked([], seed=seed)
+        result = diagnose.diagnose([rec], OPTIONS)
+        assert not result.to_json()['gap_significant'], result.to_json()['where'][:3]
+        c = Target([rec], CONFIG, 1, replicates=60).compare()
+        noise = [k for k in c.keys if k.family in closednoise.FAMILIES]
+        assert len(noise) > 30         # the statistics are there, and agree
+
+
+def test_headings_unknown_without_still_steps_add_no_residual_statistics():
+    rec = tracked([fx.CorrelatedNoise((PAIR,), 0.03)], episodes=8)
+    rec.heading_deg[:] = np.nan
+    c = Target([rec], CONFIG, 1, replicates=20).compare()
+    assert not [k for k in c.keys if k.family.startswith('loop_residual')]
+
+
+def test_still_pairs_measure_noise_alone():
+    """Where the robot does not turn (power 0, no knock) the first differences are noise:
+    their spread is the noise's and pairs sharing noise correlate."""
+    rng = np.random.default_rng(0)
+    rec = tracked([], episodes=6)
+    rec.power[:] = 0
+    rec.heading_deg[:] = np.nan
+    light = np.linspace(100, 500, 8)
+    noise = rng.normal(0, 4.0, (len(rec), 8))
+    noise[:, 6] = 0.6 * noise[:, 1] + 0.8 * noise[:, 6]
+    rec.readings[:] = light + noise
+    from khepera_noise_ros.gap import statistics
+    s = statistics.compute(statistics.closed_loop_blocks(rec, 5), 0)
+    got = dict(zip(s.keys, s.estimate))
+    spread = [v for k, v in got.items() if k.family == 'loop_still_spread']
+    assert np.allclose(spread, 4.0, rtol=0.12), spread
+    corr = {k.sensors: v for k, v in got.items() if k.family == 'loop_still_correlation'}
+    assert abs(corr[PAIR] - 0.6) < 0.1 and abs(corr[(0, 1)]) < 0.1
