@@ -43,7 +43,8 @@ def test_fast_noise_shared_by_a_pair_shows_and_is_fitted_with_that_pair():
 
 
 def test_latency_and_a_shared_pair_are_both_chosen():
-    rec = tracked([fx.SensorLatency(tuple(range(8)), 1), fx.CorrelatedNoise((PAIR,), 0.03)])
+    rec = tracked([fx.SensorLatency(tuple(range(8)), 1), fx.CorrelatedNoise((PAIR,), 0.03)],
+                  episodes=48)
     result = diagnose.diagnose([rec], OPTIONS)
     chosen = result.to_json()['compound']['chosen']
     names = [c['name'] for c in chosen]

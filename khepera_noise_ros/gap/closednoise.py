@@ -6,8 +6,9 @@ Two views, both as per-episode sums (episodes are the closed-loop blocks):
 * *still pairs* (always): first differences of consecutive readings where the
   previous command did not turn the robot and no knock came; the light did not
   move, so the difference is noise alone (headings need not be known).
-* *heading residuals* (headings recorded): readings minus a line in heading fitted
-  to their (condition, heading bin), every sample.
+* *heading residuals* (headings recorded): readings minus a fit in heading and the
+  last two turns within their (condition, heading bin), refitted in every bootstrap
+  replicate from per-episode regression sums.
 
 See docs/diagnosis.md for why and their limits.
 """
@@ -19,7 +20,8 @@ from .blocks import Key
 
 BANDS = (0.0, 175.0, 350.0)       # lower edges of the level bands (readings; 525 is dark)
 HEADING_BIN = 10.0                # degrees per heading bin of the residual view
-BIN_DENSITY = 0.25                # samples per episode a heading bin needs to be used
+BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to be used
+REGRESSORS = 5                    # per cell: level, heading, its square, last two turns
 VIEWS = ('still', 'residual')
 FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
                      for s in ('spread', 'correlation', 'autocorrelation'))
@@ -42,42 +44,70 @@ def episode_parts(rec, perturb_every: int) -> dict:
     parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
                   scale=0.5)                   # var(d) = 2 var(noise) for white noise
     heading = rec.heading_deg[order]
-    known = bool(np.isfinite(heading).all())
-    e = _residuals(r, heading, rec.condition[order], episodes.size) if known \
-        else np.zeros_like(r)
-    ok = np.isfinite(e).all(axis=1) & known
-    e = np.nan_to_num(e)
-    parts.update({f'res_{k}': v for k, v in
-                  _view(e, r, ok, pair & ok & np.r_[False, ok[:-1]], ep, episodes.size,
-                        scale=1.0).items()})
+    if np.isfinite(heading).all():
+        parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
+                                     episodes.size))
     return parts
 
 
-def _residuals(r: np.ndarray, heading: np.ndarray, condition: np.ndarray,
-               episodes: int) -> np.ndarray:
-    """Readings minus a line in heading fitted to their (condition, heading bin): the
-    light's gradient within a bin is removed, not only its mean.  Scaled by
-    sqrt(n / (n - 2)) so that their variance is unbiased whatever the bin's count (real
-    and simulated data have different counts).  NaN in bins visited rarely (under
-    ``BIN_DENSITY`` samples per episode, a rate that does not depend on how many copies
-    are simulated): there a line through a few points leaves the light's curvature."""
+def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:
+    """Per-episode, per-cell regression sums of the heading-residual view (so that every
+    bootstrap replicate refits the cells' lines), and lag-1 products of the full-data
+    residuals."""
+    cell, x, use = _design(heading, condition, pair, episodes)
+    cells = int(cell.max()) + 1
+    at = ep * cells + cell
+    size = episodes * cells
+
+    def by_cell(values):
+        out = np.zeros((size,) + values.shape[1:])
+        np.add.at(out, at[use], values[use])
+        return out.reshape((episodes, cells) + values.shape[1:])
+    parts = {'res_cn': by_cell(np.ones(len(r))),
+             'res_xx': by_cell(x[:, :, None] * x[:, None, :]),
+             'res_xr': by_cell(x[:, :, None] * r[:, None, :]),
+             'res_rr': by_cell(r[:, :, None] * r[:, None, :])}
+    xx = parts['res_xx'].sum(axis=0)
+    beta = np.linalg.pinv(xx) @ parts['res_xr'].sum(axis=0)             # (cells, 5, 8)
+    e = np.where(use[:, None], r - np.einsum('ni,nik->nk', x, beta[cell]), 0.0)
+    lagged = use & pair & np.r_[False, use[:-1]]
+    lag = np.zeros_like(e)
+    lag[1:] = e[1:] * e[:-1]
+    parts.update({'res_n': _by(ep, use[:, None].astype(np.float64), episodes),
+                  'res_e2': _by(ep, e * e, episodes),
+                  'res_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+                  'res_lag_s': _by(ep, lag * lagged[:, None], episodes)})
+    return parts
+
+
+def _design(heading, condition, pair, episodes: int):
+    """(cell, regressors, usable) of the heading-residual view.
+
+    A cell is a (condition, heading bin); within it a reading is fitted by a line in
+    heading (the light's gradient within the bin) plus terms in the last two turns
+    (h(t-1) - h(t), h(t-2) - h(t)): a reading that lags takes the light of an earlier
+    heading, to first order the gradient times the turn, which would otherwise swamp
+    the noise.  Usable: samples with two previous steps, in cells visited at least
+    ``BIN_DENSITY`` times per episode (a rate that does not depend on how many copies
+    are simulated; a fit through a few points leaves the light's curvature)."""
     _, cond = np.unique(condition, return_inverse=True)
-    b = np.floor(np.mod(heading + 180.0, 360.0) / HEADING_BIN).astype(np.int64)
-    _, cell = np.unique(cond * 1000 + b, return_inverse=True)
-    n = np.bincount(cell).astype(np.float64)
     h = np.mod(heading + 180.0, 360.0)
-    hc = h - (np.bincount(cell, h) / n)[cell]
-    shh = np.bincount(cell, hc * hc)
-    out = np.empty_like(r)
-    for k in range(r.shape[1]):
-        mean = np.bincount(cell, r[:, k]) / n
-        with np.errstate(divide='ignore', invalid='ignore'):
-            slope = np.where(shh > 1e-9, np.bincount(cell, hc * r[:, k]) / shh, 0.0)
-        out[:, k] = r[:, k] - mean[cell] - slope[cell] * hc
-    with np.errstate(divide='ignore', invalid='ignore'):
-        factor = np.where((n > 2) & (n >= BIN_DENSITY * episodes), np.sqrt(n / (n - 2)),
-                          np.nan)
-    return out * factor[cell][:, None]
+    have = pair & np.r_[False, pair[:-1]]
+    turn1, turn2 = np.zeros_like(h), np.zeros_like(h)
+    turn1[1:] = _wrap(h[:-1] - h[1:])
+    turn2[2:] = _wrap(h[:-2] - h[2:])
+    b = np.floor(h / HEADING_BIN).astype(np.int64)
+    _, cell = np.unique(cond * 1000 + b, return_inverse=True)
+    n = np.bincount(cell, have.astype(np.float64))
+    centre = np.bincount(cell, have * h) / np.maximum(n, 1)
+    hc = h - centre[cell]
+    x = np.stack([np.ones_like(h), hc, hc * hc, turn1, turn2], axis=1)
+    use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
+    return cell, x, use
+
+
+def _wrap(d: np.ndarray) -> np.ndarray:
+    return np.mod(d + 180.0, 360.0) - 180.0
 
 
 def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
@@ -110,40 +140,72 @@ def _by(ep: np.ndarray, values: np.ndarray, episodes: int) -> np.ndarray:
 def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
     """(keys, columns) of stratum ``s`` (one condition) from the (R, S, D) sums."""
     keys, cols = [], []
-    for view, prefix in (('still', ''), ('residual', 'res_')):
-        if view == 'residual' and not b.extra['heading']:
+    views = [('still', _still(b, sums, s))]
+    if b.extra['heading']:
+        views.append(('residual', _residual(b, sums, s)))
+    for view, (n, cov, bands, lag) in views:
+        if n[0] < 8:                         # too few samples to say anything
             continue
-        n = b.part(sums, prefix + 'n')[:, s, 0]
-        if not np.any(n[:1] >= 8):                   # too few samples to say anything
-            continue
-        s2 = b.part(sums, prefix + 's2')[:, s]           # (R, 8, 8)
-        var = np.diagonal(s2, axis1=-2, axis2=-1)        # (R, 8)
-        sd = np.sqrt(var)
-        band_n = b.part(sums, prefix + 'band_n')[:, s]
-        band = np.sqrt(b.part(sums, prefix + 'band_s2')[:, s] / band_n)
-        if view == 'residual':      # one band: where the light is steep, the residual
-            band_n = band_n.sum(axis=1, keepdims=True)          # spread is not noise alone
-            band = np.sqrt(var / n[:, None])[:, None, :]
-        for j, lo in enumerate(BANDS[:band.shape[1]]):
-            hi = BANDS[j + 1] if j + 1 < band.shape[1] else 525.0
+        sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))             # (R, 8)
+        for part, count, spread in bands:
             for k in range(8):
-                if band_n[0, j, k] >= 8:
-                    keys.append(Key(f'loop_{view}_spread', (k,), condition,
-                                    f'level {lo:g}-{hi:g}'))
-                    cols.append(band[:, j, k])
-        corr = s2 / (sd[:, :, None] * sd[:, None, :])
+                if count[0, k] >= 8:
+                    keys.append(Key(f'loop_{view}_spread', (k,), condition, part))
+                    cols.append(spread[:, k])
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
         for k in range(8):
             for m in range(k + 1, 8):
                 keys.append(Key(f'loop_{view}_correlation', (k, m), condition, None))
                 cols.append(corr[:, k, m])
-        lag_n = b.part(sums, prefix + 'lag_n')[:, s, 0]
-        if lag_n[0] >= 8:
-            acf = b.part(sums, prefix + 'lag_s')[:, s] / lag_n[:, None] / (var / n[:, None])
+        if lag is not None:
             part = 'lag 1 of differences' if view == 'still' else 'lag 1'
             for k in range(8):
                 keys.append(Key(f'loop_{view}_autocorrelation', (k,), condition, part))
-                cols.append(acf[:, k])
+                cols.append(lag[:, k])
     return keys, cols
+
+
+def _still(b, sums, s):
+    """(count, covariance, spread bands, lag-1 autocorrelation) of the still view."""
+    n = b.part(sums, 'n')[:, s, 0]
+    cov = b.part(sums, 's2')[:, s] / n[:, None, None]
+    band_n = b.part(sums, 'band_n')[:, s]
+    spread = np.sqrt(b.part(sums, 'band_s2')[:, s] / band_n)
+    bands = [(f'level {lo:g}-{hi:g}', band_n[:, j], spread[:, j])
+             for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,)))]
+    lag_n = b.part(sums, 'lag_n')[:, s, 0]
+    lag = None
+    if lag_n[0] >= 8:
+        lag = b.part(sums, 'lag_s')[:, s] / lag_n[:, None] \
+            / np.diagonal(cov, axis1=-2, axis2=-1)
+    return n, cov, bands, lag
+
+
+def _residual(b, sums, s):
+    """The heading-residual view, every cell's fit redone in each replicate: each cell's
+    residual covariance (over its degrees of freedom), pooled with weights its count.
+    One spread per sensor: where the light is steep a band's residuals are not noise
+    alone."""
+    cn = b.part(sums, 'res_cn')[:, s]                                  # (R, C)
+    xx, xr = b.part(sums, 'res_xx')[:, s], b.part(sums, 'res_xr')[:, s]
+    fitted = np.einsum('rcik,rcij,rcjl->rckl', xr, np.linalg.pinv(xx), xr)
+    rss = b.part(sums, 'res_rr')[:, s] - fitted                       # (R, C, 8, 8)
+    full = cn >= REGRESSORS + 1
+    # each cell's unbiased covariance, weighted by its count: the same target whatever
+    # the number of copies (weights n - 4 would favour busy cells more in short data)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        weight = np.where(full, cn / (cn - REGRESSORS), 0.0)
+    dof = np.where(full, cn, 0.0).sum(axis=1)
+    cov = (rss * weight[..., None, None]).sum(axis=1) / dof[:, None, None]
+    n = b.part(sums, 'res_n')[:, s, 0]
+    bands = [('level 0-525', np.repeat(dof[:, None], 8, axis=1),
+              np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)))]
+    lag_n = b.part(sums, 'res_lag_n')[:, s, 0]
+    lag = None
+    if lag_n[0] >= 8:
+        lag = b.part(sums, 'res_lag_s')[:, s] / lag_n[:, None] \
+            / (b.part(sums, 'res_e2')[:, s] / n[:, None])
+    return dof, cov, bands, lag
 
 
 def evidence(c, channels) -> np.ndarray:

@@ -394,11 +394,14 @@ def latency(target: Target, c: Comparison) -> Candidate:
     if not turned:
         return Candidate(name, None, 'readings follow heading changes at once')
     # sensors whose turn responses pass for simulated can lag too: their closed-loop
-    # noise residuals then take the earlier heading's light; the simulator judges
+    # noise residuals then take the earlier heading's light; the simulator judges on the
+    # statistics other than noise ones (other sensor effects act on those too)
     options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
         k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
+    families = {k.family for k in target.real.keys} - closednoise.FAMILIES
     sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
-        target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)))))
+        target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),
+                         families)))
     return Candidate(name, fx.SensorLatency(sensors, delay),
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 
