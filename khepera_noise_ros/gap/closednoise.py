@@ -41,6 +41,7 @@ def episode_parts(rec, perturb_every: int) -> dict:
     d[1:] = r[1:] - r[:-1]
     level = np.zeros_like(r)
     level[1:] = (r[1:] + r[:-1]) / 2
+    # names distinct from ``gap.closedloop``'s own sums: ``still_`` and ``res_``
     parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
                   scale=0.5)                   # var(d) = 2 var(noise) for white noise
     heading = rec.heading_deg[order]
@@ -119,15 +120,15 @@ def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
     xs = x * use[:, None]
     lag = np.zeros_like(x)
     lag[1:] = x[1:] * x[:-1]
-    out = {'n': _by(ep, use[:, None].astype(np.float64), episodes),
-           's2': _by(ep, (xs[:, :, None] * xs[:, None, :]).reshape(len(x), -1),
+    out = {'still_n': _by(ep, use[:, None].astype(np.float64), episodes),
+           'still_s2': _by(ep, (xs[:, :, None] * xs[:, None, :]).reshape(len(x), -1),
                      episodes).reshape(episodes, 8, 8) * scale,
-           'band_n': _by(ep, onehot.reshape(len(x), -1).astype(np.float64),
+           'still_band_n': _by(ep, onehot.reshape(len(x), -1).astype(np.float64),
                          episodes).reshape(episodes, len(BANDS), 8),
-           'band_s2': _by(ep, (onehot * (xs * xs)[:, None, :]).reshape(len(x), -1),
+           'still_band_s2': _by(ep, (onehot * (xs * xs)[:, None, :]).reshape(len(x), -1),
                           episodes).reshape(episodes, len(BANDS), 8) * scale,
-           'lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
-           'lag_s': _by(ep, lag * lagged[:, None], episodes) * scale}
+           'still_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+           'still_lag_s': _by(ep, lag * lagged[:, None], episodes) * scale}
     return out
 
 
@@ -167,16 +168,16 @@ def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
 
 def _still(b, sums, s):
     """(count, covariance, spread bands, lag-1 autocorrelation) of the still view."""
-    n = b.part(sums, 'n')[:, s, 0]
-    cov = b.part(sums, 's2')[:, s] / n[:, None, None]
-    band_n = b.part(sums, 'band_n')[:, s]
-    spread = np.sqrt(b.part(sums, 'band_s2')[:, s] / band_n)
+    n = b.part(sums, 'still_n')[:, s, 0]
+    cov = b.part(sums, 'still_s2')[:, s] / n[:, None, None]
+    band_n = b.part(sums, 'still_band_n')[:, s]
+    spread = np.sqrt(b.part(sums, 'still_band_s2')[:, s] / band_n)
     bands = [(f'level {lo:g}-{hi:g}', band_n[:, j], spread[:, j])
              for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,)))]
-    lag_n = b.part(sums, 'lag_n')[:, s, 0]
+    lag_n = b.part(sums, 'still_lag_n')[:, s, 0]
     lag = None
     if lag_n[0] >= 8:
-        lag = b.part(sums, 'lag_s')[:, s] / lag_n[:, None] \
+        lag = b.part(sums, 'still_lag_s')[:, s] / lag_n[:, None] \
             / np.diagonal(cov, axis1=-2, axis2=-1)
     return n, cov, bands, lag
 
@@ -223,3 +224,29 @@ def evidence(c, channels) -> np.ndarray:
                 count[i, j] += 1
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(count > 0, zsum / np.sqrt(count), 0.0)
+
+
+def spread_rows(c) -> list:
+    """(key, real, sim, se, z) of the closed-loop spreads (both views)."""
+    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
+            if k.family in ('loop_still_spread', 'loop_residual_spread')]
+
+
+def spread_cells(c, sensors, real) -> list:
+    """[(level, excess variance)] of ``sensors`` for a spread law: the still view per
+    level band (at the band's middle), the residual view per sensor at its mean level
+    (``closed_loop_level`` of the ``real`` statistics): sensors at different levels
+    trace the law together."""
+    level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
+             if k.family == 'closed_loop_level'}
+    out = []
+    for k, r, s, se, z in spread_rows(c):
+        if k.sensors[0] not in sensors or not (np.isfinite(r) and np.isfinite(s)):
+            continue
+        excess = r * r - s * s
+        if k.family == 'loop_still_spread':
+            lo, hi = (float(v) for v in k.part.split()[1].split('-'))
+            out.append(((lo + hi) / 2, excess))
+        elif (k.sensors, k.condition) in level:
+            out.append((level[(k.sensors, k.condition)], excess))
+    return out

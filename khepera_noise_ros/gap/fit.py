@@ -268,13 +268,14 @@ def intensity(target: Target, c: Comparison) -> Candidate:
         best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
         sensors, shared = tuple(channels[i] for i in best), True
     else:
-        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
-                                if z > Z_DETECT}))
+        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread') +
+                                closednoise.spread_rows(c) if z > Z_DETECT}))
         shared = False
     if not sensors:
         return Candidate(name, None, 'no extra spread or shared noise to explain')
     cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
-             for s in [_level(c, k)] if s is not None]
+             for s in [_level(c, k)] if s is not None] + closednoise.spread_cells(
+                 c, sensors, target.real)
     options = [fx.IntensityDependentNoise(sensors, round(k, 6), e, ANCHOR, round(c0, 4), d,
                                           shared)
                for d, e, c0, k, _ in spreadlaw.laws(cells)]
