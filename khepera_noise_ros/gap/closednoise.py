@@ -120,16 +120,16 @@ def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
     xs = x * use[:, None]
     lag = np.zeros_like(x)
     lag[1:] = x[1:] * x[:-1]
-    out = {'still_n': _by(ep, use[:, None].astype(np.float64), episodes),
-           'still_s2': _by(ep, (xs[:, :, None] * xs[:, None, :]).reshape(len(x), -1),
-                     episodes).reshape(episodes, 8, 8) * scale,
-           'still_band_n': _by(ep, onehot.reshape(len(x), -1).astype(np.float64),
-                         episodes).reshape(episodes, len(BANDS), 8),
-           'still_band_s2': _by(ep, (onehot * (xs * xs)[:, None, :]).reshape(len(x), -1),
-                          episodes).reshape(episodes, len(BANDS), 8) * scale,
-           'still_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
-           'still_lag_s': _by(ep, lag * lagged[:, None], episodes) * scale}
-    return out
+    n = len(x)
+    return {'still_n': _by(ep, use[:, None].astype(np.float64), episodes),
+            'still_s2': scale * _by(ep, (xs[:, :, None] * xs[:, None, :]).reshape(n, -1),
+                                    episodes).reshape(episodes, 8, 8),
+            'still_band_n': _by(ep, onehot.reshape(n, -1).astype(np.float64),
+                                episodes).reshape(episodes, len(BANDS), 8),
+            'still_band_s2': scale * _by(ep, (onehot * (xs * xs)[:, None, :]).reshape(n, -1),
+                                         episodes).reshape(episodes, len(BANDS), 8),
+            'still_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+            'still_lag_s': scale * _by(ep, lag * lagged[:, None], episodes)}
 
 
 def _by(ep: np.ndarray, values: np.ndarray, episodes: int) -> np.ndarray:

@@ -303,7 +303,8 @@ def _level(c: Comparison, key) -> float | None:
 
 def drift(target: Target, c: Comparison) -> Candidate:
     name = fx.TemporalDrift.name
-    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')]
+    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')] or \
+        [(k, r, s, z) for k, r, s, se, z in _rows(c, 'loop_residual_autocorrelation')]
     sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
     if not sensors:
         return Candidate(name, None, 'no extra autocorrelation over time and no level '
@@ -314,8 +315,12 @@ def drift(target: Target, c: Comparison) -> Candidate:
     shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
         > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
-                         if k.sensors[0] in sensors and k.part == f'lag {lag}'])
+                         if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
            for lag in (1, 3)}
+    if not np.isfinite(rho[1]):
+        rho[1] = 0.0
+    if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
+        rho[3] = max(rho[1], 0.0) ** 3
     a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
     tau0 = -1.0 / math.log(a)
     spread = _by_condition(c, 'spread')
