@@ -84,8 +84,8 @@ def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:
 def _design(heading, condition, pair, episodes: int):
     """(cell, regressors, usable) of the heading-residual view.
 
-    A cell is a (condition, heading bin); within it a reading is fitted by a line in
-    heading (the light's gradient within the bin) plus terms in the last two turns
+    A cell is a (condition, heading bin); within it a reading is fitted by a quadratic in
+    heading (the light's gradient and curvature within the bin) plus terms in the last two turns
     (h(t-1) - h(t), h(t-2) - h(t)): a reading that lags takes the light of an earlier
     heading, to first order the gradient times the turn, which would otherwise swamp
     the noise.  Usable: samples with two previous steps, in cells visited at least
@@ -193,7 +193,7 @@ def _residual(b, sums, s):
     rss = b.part(sums, 'res_rr')[:, s] - fitted                       # (R, C, 8, 8)
     full = cn >= REGRESSORS + 1
     # each cell's unbiased covariance, weighted by its count: the same target whatever
-    # the number of copies (weights n - 4 would favour busy cells more in short data)
+    # the number of copies (weights n - 5 would favour busy cells more in short data)
     with np.errstate(divide='ignore', invalid='ignore'):
         weight = np.where(full, cn / (cn - REGRESSORS), 0.0)
     dof = np.where(full, cn, 0.0).sum(axis=1)
