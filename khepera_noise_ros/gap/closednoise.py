@@ -15,6 +15,7 @@ See docs/diagnosis.md for why and their limits.
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 
 from .blocks import Key
 
@@ -61,15 +62,14 @@ def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:
     size = episodes * cells
 
     def by_cell(values):
-        out = np.zeros((size,) + values.shape[1:])
-        np.add.at(out, at[use], values[use])
-        return out.reshape((episodes, cells) + values.shape[1:])
+        return _by(at[use], values[use].reshape(int(use.sum()), -1), size) \
+            .reshape((episodes, cells) + values.shape[1:])
     parts = {'res_cn': by_cell(np.ones(len(r))),
              'res_xx': by_cell(x[:, :, None] * x[:, None, :]),
              'res_xr': by_cell(x[:, :, None] * r[:, None, :]),
              'res_rr': by_cell(r[:, :, None] * r[:, None, :])}
     xx = parts['res_xx'].sum(axis=0)
-    beta = np.linalg.pinv(xx) @ parts['res_xr'].sum(axis=0)             # (cells, 5, 8)
+    beta = _solve(xx, parts['res_xr'].sum(axis=0))                       # (cells, 5, 8)
     e = np.where(use[:, None], r - np.einsum('ni,nik->nk', x, beta[cell]), 0.0)
     lagged = use & pair & np.r_[False, use[:-1]]
     lag = np.zeros_like(e)
@@ -107,6 +107,14 @@ def _design(heading, condition, pair, episodes: int):
     return cell, x, use
 
 
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched a^-1 b for moment matrices, with a tiny ridge: empty or degenerate cells
+    (a turn term that never varies) give finite coefficients."""
+    scale = np.trace(a, axis1=-2, axis2=-1)[..., None, None] + 1e-12
+    ridge = 1e-10 * scale * np.eye(a.shape[-1])
+    return np.linalg.solve(a + ridge, b)
+
+
 def _wrap(d: np.ndarray) -> np.ndarray:
     return np.mod(d + 180.0, 360.0) - 180.0
 
@@ -133,9 +141,10 @@ def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
 
 
 def _by(ep: np.ndarray, values: np.ndarray, episodes: int) -> np.ndarray:
-    out = np.zeros((episodes, values.shape[1]))
-    np.add.at(out, ep, values)
-    return out
+    """(episodes, K) sums of the (N, K) ``values`` by ``ep`` (one sparse product)."""
+    pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
+                             shape=(episodes, ep.size))
+    return np.asarray(pick @ values, np.float64)
 
 
 def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
@@ -189,7 +198,7 @@ def _residual(b, sums, s):
     alone."""
     cn = b.part(sums, 'res_cn')[:, s]                                  # (R, C)
     xx, xr = b.part(sums, 'res_xx')[:, s], b.part(sums, 'res_xr')[:, s]
-    fitted = np.einsum('rcik,rcij,rcjl->rckl', xr, np.linalg.pinv(xx), xr)
+    fitted = np.einsum('rcik,rcil->rckl', xr, _solve(xx, xr))
     rss = b.part(sums, 'res_rr')[:, s] - fitted                       # (R, C, 8, 8)
     full = cn >= REGRESSORS + 1
     # each cell's unbiased covariance, weighted by its count: the same target whatever
