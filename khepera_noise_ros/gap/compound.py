@@ -136,8 +136,8 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
 
 
 def _local_gain(before, current, after) -> float:
-    """The largest share of one protocol's own held-out discrepancy (stationary or
-    closed-loop statistics) a step removes.  A turn error acts only on closed-loop
+    """The largest share of one part's own held-out discrepancy (stationary, closed-loop,
+    or closed-loop noise statistics) a step removes.  A turn error acts only on closed-loop
     statistics, whose discrepancy can be small beside the stationary one's."""
     best = 0.0
     for part in ('stationary', 'closed_loop', 'closed_loop_noise'):
