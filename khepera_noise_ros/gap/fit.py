@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import limits, pileup, spreadlaw, timesig
+from . import closednoise, limits, pileup, spreadlaw, timesig
 from .groups import cluster, excess_evidence, part_evidence
 from .statistics import STEP_LAGS
 from .target import Target
@@ -179,8 +179,9 @@ def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndar
     whole residual) when there are none."""
     channels = _channels(target)
     real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
-    if not real:
-        return excess_evidence(c, channels)[0]
+    if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
+        z = excess_evidence(c, channels)[0]
+        return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z
     sim = target.simulate(kinds=('stationary',))
     return part_evidence(real, sim, channels, part)[0]
 
@@ -253,13 +254,14 @@ def intensity(target: Target, c: Comparison) -> Candidate:
         best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
         sensors, shared = tuple(channels[i] for i in best), True
     else:
-        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
-                                if z > Z_DETECT}))
+        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread') +
+                                closednoise.spread_rows(c) if z > Z_DETECT}))
         shared = False
     if not sensors:
         return Candidate(name, None, 'no extra spread or shared noise to explain')
     cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
-             for s in [_level(c, k)] if s is not None]
+             for s in [_level(c, k)] if s is not None] + closednoise.spread_cells(
+                 c, sensors, target.real)
     options = [fx.IntensityDependentNoise(sensors, round(k, 6), e, ANCHOR, round(c0, 4), d,
                                           shared)
                for d, e, c0, k, _ in spreadlaw.laws(cells)]
@@ -287,7 +289,8 @@ def _level(c: Comparison, key) -> float | None:
 
 def drift(target: Target, c: Comparison) -> Candidate:
     name = fx.TemporalDrift.name
-    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')]
+    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')] or \
+        [(k, r, s, z) for k, r, s, se, z in _rows(c, 'loop_residual_autocorrelation')]
     sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
     change = timesig.of_target(target)
     moved = bool(change and change['significant'])   # levels moving together over time
@@ -302,8 +305,12 @@ def drift(target: Target, c: Comparison) -> Candidate:
     shared = moved or len(idx) > 1 and \
         evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
-                         if k.sensors[0] in sensors and k.part == f'lag {lag}'])
+                         if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
            for lag in (1, 3)}
+    if not np.isfinite(rho[1]):
+        rho[1] = 0.0
+    if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
+        rho[3] = max(rho[1], 0.0) ** 3
     a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
     tau0 = -1.0 / math.log(a)
     spread = _by_condition(c, 'spread')
@@ -386,8 +393,15 @@ def latency(target: Target, c: Comparison) -> Candidate:
               if abs(z) > Z_DETECT}
     if not turned:
         return Candidate(name, None, 'readings follow heading changes at once')
-    sensors = tuple(sorted(turned))
-    delay = _best_delay(target, sensors, (1, 2, 3), kinds=('closed_loop',))
+    # sensors whose turn responses pass for simulated can lag too: their closed-loop
+    # noise residuals then take the earlier heading's light; the simulator judges on the
+    # statistics other than noise ones (other sensor effects act on those too)
+    options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
+        k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
+    families = {k.family for k in target.real.keys} - closednoise.FAMILIES
+    sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
+        target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),
+                         families)))
     return Candidate(name, fx.SensorLatency(sensors, delay),
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 
