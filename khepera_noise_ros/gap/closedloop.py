@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
-from . import turnscatter
+from . import closednoise, turnscatter
 from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 
@@ -49,6 +49,7 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
             if heading_known else turnscatter.empty_heading())
         stratum.append(conditions.index(str(rec.condition[idx[0]])))
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
+    parts.update(closednoise.episode_parts(rec, perturb_every))     # noise structure
     sums, layout = pack(parts, len(stratum))
     return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
                   sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
@@ -121,6 +122,9 @@ def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
             h = b.part(sums, 'heading')[:, s]
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 1] / h[:, 0])
+        more = closednoise.stats(b, sums, s, c)
+        keys += more[0]
+        cols += more[1]
         more_keys, more_cols = turnscatter.scatter_stats(b, sums, s, c)
         keys += more_keys
         cols += more_cols

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import effects as fx
-from . import fit
+from . import closednoise, fit
 from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
@@ -136,24 +136,34 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
 
 
 def _local_gain(before, current, after) -> float:
-    """The largest share of one protocol's own held-out discrepancy (stationary or
-    closed-loop statistics) a step removes.  A turn error acts only on closed-loop
+    """The largest share of one part's own held-out discrepancy (stationary, closed-loop,
+    or closed-loop noise statistics) a step removes.  A turn error acts only on closed-loop
     statistics, whose discrepancy can be small beside the stationary one's."""
     best = 0.0
-    for closed in (False, True):
-        d0, d1, d2 = (_part(c, closed) for c in (before, current, after))
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise'):
+        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
             best = max(best, (d1 - d2) / d0)
     return best
 
 
-def _part(c, closed: bool) -> float:
-    keep = np.array([(k.family not in STATIONARY) == closed for k in c.keys], bool)
+def _part(c, part: str) -> float:
+    """The discrepancy of one protocol's statistics; the closed loop's noise statistics
+    (``gap.closednoise``) count on their own: sensor effects act there beside a latency
+    or turn error that dominates the closed loop's other statistics."""
+    keep = np.array([_protocol(k.family) == part for k in c.keys], bool)
     return c.select(keep).discrepancy if keep.any() else 0.0
 
 
+def _protocol(family: str) -> str:
+    if family in STATIONARY:
+        return 'stationary'
+    return 'closed_loop_noise' if family in closednoise.FAMILIES else 'closed_loop'
+
+
 STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
-              'spread_vs_level', 'step_response', 'mode_share', 'granularity'}
+              'spread_vs_level', 'step_response', 'mode_share', 'granularity',
+              'pileup'}
 
 
 def _backfit(a: Target, chosen: list) -> list:

@@ -9,7 +9,8 @@ fingerprint, or has no data that could show one, returns no effect and says why.
 
 Fingerprints (what the statistics of ``gap.statistics`` show):
   sensor_gain_offset         per-sensor levels off, linearly in the level
-  saturation_quantization    readings piled up at a limit the simulator exceeds; a value grid
+  saturation_quantization    readings piled up at a limit the simulator exceeds (gap.pileup);
+                             a value grid; dropouts
   correlated_noise           pairs more correlated than simulated (clustered into groups)
   intensity_dependent_noise  extra shared spread that grows steeply with the level
   temporal_drift             extra autocorrelation; level offsets no fixed calibration makes
@@ -27,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import fitturn, limits, spreadlaw
+from . import closednoise, fitturn, limits, pileup, spreadlaw, timesig
 from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
 from .fitbase import golden as _golden, rows as _rows
 from .groups import cluster, excess_evidence, part_evidence
@@ -50,13 +51,17 @@ def gain_offset(target: Target, c: Comparison) -> Candidate:
     rows = _rows(c, 'level')
     if not rows or target.base == 'observed':
         return Candidate(name, None, 'no levels from the light model to compare')
+    change = timesig.of_target(target)
+    if change and change['significant']:      # a gain or offset is what the shared change
+        rows = timesig.steady_rows(rows, target, change)       # over time leaves
     sensors = sorted({k.sensors[0] for k, *_ in rows})
     chi = {s: sum(z * z for k, *_, z in rows if k.sensors[0] == s) for s in sensors}
     dof = {s: sum(1 for k, *_ in rows if k.sensors[0] == s) for s in sensors}
     p = holm(np.array([sps.chi2.sf(chi[s], dof[s]) for s in sensors]))
     located = [s for s, ps in zip(sensors, p) if ps < ALPHA]
     if not located:
-        return Candidate(name, None, 'no sensor\'s levels differ significantly')
+        return Candidate(name, None, 'no sensor\'s levels differ significantly' + (
+            ' beyond a shared change over time' if change and change['significant'] else ''))
     gains, offsets = [], []
     for s in located:
         real = np.array([r for k, r, *_ in rows if k.sensors[0] == s])
@@ -76,15 +81,13 @@ def saturation(target: Target, c: Comparison) -> Candidate:
     real = np.concatenate([r.readings for r in target.recordings])
     sim = np.concatenate([r.readings for r in target.simulate()])
     rec = target.recordings[0]
-    low, high, grid = {}, {}, {}
+    found = pileup.limits(real, sim, rec.channels_used, reading_range(rec.manifest, rec.channels))
+    # the limit holding most readings at each end, with the sensors piled up there
+    low, high = (pileup.strongest(found, end) for end in (0, 1))
+    grid = {}
     for sensor in rec.channels_used:
         x, y = real[:, sensor], sim[:, sensor]
         x, y = x[np.isfinite(x)], y[np.isfinite(y)]
-        ends = _clipped_ends(x, y, reading_range(rec.manifest, rec.channels))
-        if ends[0] is not None:
-            low[sensor] = ends[0]
-        if ends[1] is not None:
-            high[sensor] = ends[1]
         lattice = _grid(x[(x > x.min()) & (x < x.max())])
         # closed-loop statistics have no granularity: there the simulator's own readings
         # not lying on the real lattice is the evidence
@@ -108,39 +111,22 @@ def saturation(target: Target, c: Comparison) -> Candidate:
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
-            sensors = set(grid) | (set(low) if use_low else set()) | \
-                (set(high) if use_high else set()) | set(lost)
+            sensors = set(grid) | (set(low['sensors']) if use_low else set()) | \
+                (set(high['sensors']) if use_high else set()) | set(lost)
             if sensors:
                 options.append(fx.SaturationQuantization(
                     tuple(sorted(sensors)),
-                    low=float(np.median(list(low.values()))) if use_low else 0.0,
-                    high=float(np.median(list(high.values()))) if use_high else ANCHOR,
+                    low=low['value'] if use_low else 0.0,
+                    high=high['value'] if use_high else ANCHOR,
                     step=float(step), origin=float(origin), **drop))
     kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
-    effect = min(options, key=lambda e: target.objective([e], kinds))
-    what = [w for w, found in (('clipped below', effect.low > 0),
-                               ('clipped above', effect.high < ANCHOR),
+    effect = min(options, key=lambda e: target.objective([e], kinds, limits=True))
+    what = [w for w, found in ((f'clipped below at {effect.low:g}', effect.low > 0),
+                               (f'clipped above at {effect.high:g}', effect.high < ANCHOR),
                                ('on a grid', effect.step > 1),
                                (f'dropping out to {effect.dropout_value:g} at rate '
                                 f'{effect.dropout:.2%}', effect.dropout > 0)) if found]
     return Candidate(name, effect, f'{_names(effect.sensors)} {" and ".join(what)}')
-
-
-def _clipped_ends(real: np.ndarray, sim: np.ndarray, limits) -> tuple:
-    """(low, high) where a sensor's readings are held at a limit: they pile up on their
-    extreme value (0.5% of them, and twice as many as on the next value in), while 0.5%
-    of the simulated ones lie beyond it.  Merely narrower noise has no pile-up; a limit
-    of the reading range itself is modelled and does not count."""
-    values, counts = np.unique(real, return_counts=True)
-    if values.size < 2:
-        return None, None
-    out = []
-    for i, j, beyond, limit in ((0, 1, sim < values[0], limits[0]),
-                                (-1, -2, sim > values[-1], limits[1])):
-        held = counts[i] >= 0.005 * real.size and counts[i] >= 2 * counts[j] \
-            and np.mean(beyond) >= 0.005 and values[i] != limit
-        out.append(float(values[i]) if held else None)
-    return tuple(out)
 
 
 def _grid(x: np.ndarray) -> tuple[int, int]:
@@ -163,8 +149,9 @@ def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndar
     whole residual) when there are none."""
     channels = _channels(target)
     real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
-    if not real:
-        return excess_evidence(c, channels)[0]
+    if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
+        z = excess_evidence(c, channels)[0]
+        return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z
     sim = target.simulate(kinds=('stationary',))
     return part_evidence(real, sim, channels, part)[0]
 
@@ -237,13 +224,14 @@ def intensity(target: Target, c: Comparison) -> Candidate:
         best = max(clusters, key=lambda g: evidence[np.ix_(g, g)].sum())
         sensors, shared = tuple(channels[i] for i in best), True
     else:
-        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread')
-                                if z > Z_DETECT}))
+        sensors = tuple(sorted({k.sensors[0] for k, r, s, se, z in _rows(c, 'spread') +
+                                closednoise.spread_rows(c) if z > Z_DETECT}))
         shared = False
     if not sensors:
         return Candidate(name, None, 'no extra spread or shared noise to explain')
     cells = [(s, r * r - m * m) for k, r, m, *_ in _rows(c, 'spread') if k.sensors[0] in sensors
-             for s in [_level(c, k)] if s is not None]
+             for s in [_level(c, k)] if s is not None] + closednoise.spread_cells(
+                 c, sensors, target.real)
     options = [fx.IntensityDependentNoise(sensors, round(k, 6), e, ANCHOR, round(c0, 4), d,
                                           shared)
                for d, e, c0, k, _ in spreadlaw.laws(cells)]
@@ -271,19 +259,28 @@ def _level(c: Comparison, key) -> float | None:
 
 def drift(target: Target, c: Comparison) -> Candidate:
     name = fx.TemporalDrift.name
-    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')]
+    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')] or \
+        [(k, r, s, z) for k, r, s, se, z in _rows(c, 'loop_residual_autocorrelation')]
     sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
+    change = timesig.of_target(target)
+    moved = bool(change and change['significant'])   # levels moving together over time
+    if moved:
+        sensors = tuple(_channels(target))
     if not sensors:
         return Candidate(name, None, 'no extra autocorrelation over time and no level '
                                      'offsets beyond a fixed calibration')
     channels = _channels(target)
     evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
-    shared = len(idx) > 1 and evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() \
-        > Z_DETECT
+    shared = moved or len(idx) > 1 and \
+        evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
-                         if k.sensors[0] in sensors and k.part == f'lag {lag}'])
+                         if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
            for lag in (1, 3)}
+    if not np.isfinite(rho[1]):
+        rho[1] = 0.0
+    if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
+        rho[3] = max(rho[1], 0.0) ** 3
     a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
     tau0 = -1.0 / math.log(a)
     spread = _by_condition(c, 'spread')
@@ -291,6 +288,9 @@ def drift(target: Target, c: Comparison) -> Candidate:
     ratio = [spread[cond][s][0] / level[cond][s][1] for cond in spread for s in sensors
              if level.get(cond, {}).get(s, (0, 0))[1] > 0]
     sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
+    if moved:             # start from the shared factors' spread, slow over the runs
+        sd0 = max(sd0, change['sd'])
+        tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
 
     def make(x, shared=shared):
         # bounded so that the model can always run: a time constant of 0 has no AR(1)
@@ -307,7 +307,8 @@ def drift(target: Target, c: Comparison) -> Candidate:
         if target.objective([other]) < result.fun:
             effect = other
     kind = 'one shared wander' if effect.shared else 'a wander per sensor'
-    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind})')
+    how = f'; levels move together over time (sd {change["sd"]:.1%})' if moved else ''
+    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind}){how}')
 
 
 def _unexplained_levels(c: Comparison) -> tuple:
@@ -362,8 +363,15 @@ def latency(target: Target, c: Comparison) -> Candidate:
               if abs(z) > Z_DETECT}
     if not turned:
         return Candidate(name, None, 'readings follow heading changes at once')
-    sensors = tuple(sorted(turned))
-    delay = _best_delay(target, sensors, (1, 2, 3), kinds=('closed_loop',))
+    # sensors whose turn responses pass for simulated can lag too: their closed-loop
+    # noise residuals then take the earlier heading's light; the simulator judges on the
+    # statistics other than noise ones (other sensor effects act on those too)
+    options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
+        k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
+    families = {k.family for k in target.real.keys} - closednoise.FAMILIES
+    sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
+        target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),
+                         families)))
     return Candidate(name, fx.SensorLatency(sensors, delay),
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 

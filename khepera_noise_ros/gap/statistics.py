@@ -20,7 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
-from . import blocklength
+from . import blocklength, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 
@@ -141,6 +141,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     residue = _residue_hits(xo, _modal_residues(x)) if integer \
         else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
+    parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb)
     sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
@@ -334,6 +335,10 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
                     add(Key('step_response', (sensor,), None, f'sample {j} after a change'),
                         response[:, j, k])
     total = n.sum(axis=1)[:, None]
+    edge = b.part(sums, 'edge').sum(axis=1) / total[..., None]           # (R, C, 2)
+    for k, sensor in enumerate(ch):
+        for j, end in enumerate(pileup.ENDS):
+            add(Key('pileup', (sensor,), None, end), edge[:, k, j])
     if b.extra['integer']:
         for c in conditions:
             members = [s for s, lab in enumerate(b.strata) if lab[0] == c]

@@ -1,0 +1,261 @@
+"""Closed-loop noise statistics: the structure of the readings' noise while the robot
+turns (spread by level, correlation across sensors, lag-1 autocorrelation).
+
+Two views, both as per-episode sums (episodes are the closed-loop blocks):
+
+* *still pairs* (always): first differences of consecutive readings where the
+  previous command did not turn the robot and no knock came; the light did not
+  move, so the difference is noise alone (headings need not be known).
+* *heading residuals* (headings recorded): readings minus a fit in heading and the
+  last two turns within their (condition, heading bin), refitted in every bootstrap
+  replicate from per-episode regression sums.
+
+See docs/diagnosis.md for why and their limits.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import sparse
+
+from .blocks import Key
+
+BANDS = (0.0, 175.0, 350.0)       # lower edges of the level bands (readings; 525 is dark)
+HEADING_BIN = 10.0                # degrees per heading bin of the residual view
+BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to be used
+REGRESSORS = 5                    # per cell: level, heading, its square, last two turns
+VIEWS = ('still', 'residual')
+FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
+                     for s in ('spread', 'correlation', 'autocorrelation'))
+
+
+def episode_parts(rec, perturb_every: int) -> dict:
+    """{name: (episodes, ...) sums} of both views, episodes in ``np.unique`` order."""
+    episodes, ep = np.unique(rec.episode, return_inverse=True)
+    order = np.lexsort((rec.step, ep))
+    ep, steps = ep[order], rec.step[order]
+    r = rec.readings[order][:, :8].astype(np.float64)
+    power = np.nan_to_num(rec.power[order], nan=1.0)
+    # a pair (t-1, t): same episode, consecutive steps
+    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
+    d = np.zeros_like(r)
+    d[1:] = r[1:] - r[:-1]
+    level = np.zeros_like(r)
+    level[1:] = (r[1:] + r[:-1]) / 2
+    # names distinct from ``gap.closedloop``'s own sums: ``still_`` and ``res_``
+    parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
+                  scale=0.5)                   # var(d) = 2 var(noise) for white noise
+    heading = rec.heading_deg[order]
+    if np.isfinite(heading).all():
+        parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
+                                     episodes.size))
+    return parts
+
+
+def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:
+    """Per-episode, per-cell regression sums of the heading-residual view (so that every
+    bootstrap replicate refits the cells' lines), and lag-1 products of the full-data
+    residuals."""
+    cell, x, use = _design(heading, condition, pair, episodes)
+    cells = int(cell.max()) + 1
+    at = ep * cells + cell
+    size = episodes * cells
+
+    def by_cell(values):
+        return _by(at[use], values[use].reshape(int(use.sum()), -1), size) \
+            .reshape((episodes, cells) + values.shape[1:])
+    parts = {'res_cn': by_cell(np.ones(len(r))),
+             'res_xx': by_cell(x[:, :, None] * x[:, None, :]),
+             'res_xr': by_cell(x[:, :, None] * r[:, None, :]),
+             'res_rr': by_cell(r[:, :, None] * r[:, None, :])}
+    xx = parts['res_xx'].sum(axis=0)
+    beta = _solve(xx, parts['res_xr'].sum(axis=0))                       # (cells, 5, 8)
+    e = np.where(use[:, None], r - np.einsum('ni,nik->nk', x, beta[cell]), 0.0)
+    lagged = use & pair & np.r_[False, use[:-1]]
+    lag = np.zeros_like(e)
+    lag[1:] = e[1:] * e[:-1]
+    parts.update({'res_n': _by(ep, use[:, None].astype(np.float64), episodes),
+                  'res_e2': _by(ep, e * e, episodes),
+                  'res_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+                  'res_lag_s': _by(ep, lag * lagged[:, None], episodes)})
+    return parts
+
+
+def _design(heading, condition, pair, episodes: int):
+    """(cell, regressors, usable) of the heading-residual view.
+
+    A cell is a (condition, heading bin); within it a reading is fitted by a quadratic in
+    heading (the light's gradient and curvature within the bin) plus terms in the last two turns
+    (h(t-1) - h(t), h(t-2) - h(t)): a reading that lags takes the light of an earlier
+    heading, to first order the gradient times the turn, which would otherwise swamp
+    the noise.  Usable: samples with two previous steps, in cells visited at least
+    ``BIN_DENSITY`` times per episode (a rate that does not depend on how many copies
+    are simulated; a fit through a few points leaves the light's curvature)."""
+    _, cond = np.unique(condition, return_inverse=True)
+    h = np.mod(heading + 180.0, 360.0)
+    have = pair & np.r_[False, pair[:-1]]
+    turn1, turn2 = np.zeros_like(h), np.zeros_like(h)
+    turn1[1:] = _wrap(h[:-1] - h[1:])
+    turn2[2:] = _wrap(h[:-2] - h[2:])
+    b = np.floor(h / HEADING_BIN).astype(np.int64)
+    _, cell = np.unique(cond * 1000 + b, return_inverse=True)
+    n = np.bincount(cell, have.astype(np.float64))
+    centre = np.bincount(cell, have * h) / np.maximum(n, 1)
+    hc = h - centre[cell]
+    x = np.stack([np.ones_like(h), hc, hc * hc, turn1, turn2], axis=1)
+    use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
+    return cell, x, use
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched a^-1 b for moment matrices, with a tiny ridge: empty or degenerate cells
+    (a turn term that never varies) give finite coefficients."""
+    scale = np.trace(a, axis1=-2, axis2=-1)[..., None, None] + 1e-12
+    ridge = 1e-10 * scale * np.eye(a.shape[-1])
+    return np.linalg.solve(a + ridge, b)
+
+
+def _wrap(d: np.ndarray) -> np.ndarray:
+    return np.mod(d + 180.0, 360.0) - 180.0
+
+
+def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
+          ep: np.ndarray, episodes: int, scale: float) -> dict:
+    """Sums per episode: count, cross products, per-band counts and squares (band by each
+    sensor's own level), lag-1 products (``lagged`` marks t whose t-1 is used too)."""
+    band = np.searchsorted(np.array(BANDS), level, side='right') - 1     # (N, 8)
+    onehot = (band[:, None, :] == np.arange(len(BANDS))[None, :, None]) & use[:, None, None]
+    xs = x * use[:, None]
+    lag = np.zeros_like(x)
+    lag[1:] = x[1:] * x[:-1]
+    n = len(x)
+    return {'still_n': _by(ep, use[:, None].astype(np.float64), episodes),
+            'still_s2': scale * _by(ep, (xs[:, :, None] * xs[:, None, :]).reshape(n, -1),
+                                    episodes).reshape(episodes, 8, 8),
+            'still_band_n': _by(ep, onehot.reshape(n, -1).astype(np.float64),
+                                episodes).reshape(episodes, len(BANDS), 8),
+            'still_band_s2': scale * _by(ep, (onehot * (xs * xs)[:, None, :]).reshape(n, -1),
+                                         episodes).reshape(episodes, len(BANDS), 8),
+            'still_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+            'still_lag_s': scale * _by(ep, lag * lagged[:, None], episodes)}
+
+
+def _by(ep: np.ndarray, values: np.ndarray, episodes: int) -> np.ndarray:
+    """(episodes, K) sums of the (N, K) ``values`` by ``ep`` (one sparse product)."""
+    pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
+                             shape=(episodes, ep.size))
+    return np.asarray(pick @ values, np.float64)
+
+
+def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
+    """(keys, columns) of stratum ``s`` (one condition) from the (R, S, D) sums."""
+    keys, cols = [], []
+    views = [('still', _still(b, sums, s))]
+    if b.extra['heading']:
+        views.append(('residual', _residual(b, sums, s)))
+    for view, (n, cov, bands, lag) in views:
+        if n[0] < 8:                         # too few samples to say anything
+            continue
+        sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))             # (R, 8)
+        for part, count, spread in bands:
+            for k in range(8):
+                if count[0, k] >= 8:
+                    keys.append(Key(f'loop_{view}_spread', (k,), condition, part))
+                    cols.append(spread[:, k])
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
+        for k in range(8):
+            for m in range(k + 1, 8):
+                keys.append(Key(f'loop_{view}_correlation', (k, m), condition, None))
+                cols.append(corr[:, k, m])
+        if lag is not None:
+            part = 'lag 1 of differences' if view == 'still' else 'lag 1'
+            for k in range(8):
+                keys.append(Key(f'loop_{view}_autocorrelation', (k,), condition, part))
+                cols.append(lag[:, k])
+    return keys, cols
+
+
+def _still(b, sums, s):
+    """(count, covariance, spread bands, lag-1 autocorrelation) of the still view."""
+    n = b.part(sums, 'still_n')[:, s, 0]
+    cov = b.part(sums, 'still_s2')[:, s] / n[:, None, None]
+    band_n = b.part(sums, 'still_band_n')[:, s]
+    spread = np.sqrt(b.part(sums, 'still_band_s2')[:, s] / band_n)
+    bands = [(f'level {lo:g}-{hi:g}', band_n[:, j], spread[:, j])
+             for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,)))]
+    lag_n = b.part(sums, 'still_lag_n')[:, s, 0]
+    lag = None
+    if lag_n[0] >= 8:
+        lag = b.part(sums, 'still_lag_s')[:, s] / lag_n[:, None] \
+            / np.diagonal(cov, axis1=-2, axis2=-1)
+    return n, cov, bands, lag
+
+
+def _residual(b, sums, s):
+    """The heading-residual view, every cell's fit redone in each replicate: each cell's
+    residual covariance (over its degrees of freedom), pooled with weights its count.
+    One spread per sensor: where the light is steep a band's residuals are not noise
+    alone."""
+    cn = b.part(sums, 'res_cn')[:, s]                                  # (R, C)
+    xx, xr = b.part(sums, 'res_xx')[:, s], b.part(sums, 'res_xr')[:, s]
+    fitted = np.einsum('rcik,rcil->rckl', xr, _solve(xx, xr))
+    rss = b.part(sums, 'res_rr')[:, s] - fitted                       # (R, C, 8, 8)
+    full = cn >= REGRESSORS + 1
+    # each cell's unbiased covariance, weighted by its count: the same target whatever
+    # the number of copies (weights n - 5 would favour busy cells more in short data)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        weight = np.where(full, cn / (cn - REGRESSORS), 0.0)
+    dof = np.where(full, cn, 0.0).sum(axis=1)
+    cov = (rss * weight[..., None, None]).sum(axis=1) / dof[:, None, None]
+    n = b.part(sums, 'res_n')[:, s, 0]
+    bands = [('level 0-525', np.repeat(dof[:, None], 8, axis=1),
+              np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)))]
+    lag_n = b.part(sums, 'res_lag_n')[:, s, 0]
+    lag = None
+    if lag_n[0] >= 8:
+        lag = b.part(sums, 'res_lag_s')[:, s] / lag_n[:, None] \
+            / (b.part(sums, 'res_e2')[:, s] / n[:, None])
+    return dof, cov, bands, lag
+
+
+def evidence(c, channels) -> np.ndarray:
+    """Combined z (Stouffer over conditions and views) that a pair's closed-loop noise is
+    more correlated than simulated: the fast part where the still view has it."""
+    channels = list(channels)
+    n = len(channels)
+    zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    for k, z in zip(c.keys, c.z):
+        if k.family in ('loop_still_correlation', 'loop_residual_correlation') \
+                and np.isfinite(z) and all(s in channels for s in k.sensors):
+            a, b = (channels.index(s) for s in k.sensors)
+            for i, j in ((a, b), (b, a)):
+                zsum[i, j] += z
+                count[i, j] += 1
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(count > 0, zsum / np.sqrt(count), 0.0)
+
+
+def spread_rows(c) -> list:
+    """(key, real, sim, se, z) of the closed-loop spreads (both views)."""
+    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
+            if k.family in ('loop_still_spread', 'loop_residual_spread')]
+
+
+def spread_cells(c, sensors, real) -> list:
+    """[(level, excess variance)] of ``sensors`` for a spread law: the still view per
+    level band (at the band's middle), the residual view per sensor at its mean level
+    (``closed_loop_level`` of the ``real`` statistics): sensors at different levels
+    trace the law together."""
+    level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
+             if k.family == 'closed_loop_level'}
+    out = []
+    for k, r, s, se, z in spread_rows(c):
+        if k.sensors[0] not in sensors or not (np.isfinite(r) and np.isfinite(s)):
+            continue
+        excess = r * r - s * s
+        if k.family == 'loop_still_spread':
+            lo, hi = (float(v) for v in k.part.split()[1].split('-'))
+            out.append(((lo + hi) / 2, excess))
+        elif (k.sensors, k.condition) in level:
+            out.append((level[(k.sensors, k.condition)], excess))
+    return out
