@@ -26,6 +26,7 @@ from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
+MIN_LEFT = 0.20           # ... or this share of what the chosen effects leave of one protocol's
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
@@ -51,7 +52,7 @@ class Compound:
         return {'chosen': self.steps, 'discrepancy_before': self.discrepancy_before,
                 'discrepancy_after': self.discrepancy_after,
                 'heldout_reduction': self.reduction, 'rejected': self.rejected,
-                'min_added': MIN_ADDED, 'step_alpha': STEP_ALPHA}
+                'min_added': MIN_ADDED, 'min_left': MIN_LEFT, 'step_alpha': STEP_ALPHA}
 
 
 def entry(effect, note: str, d_before: float, d_after: float, d_prev: float,
@@ -103,23 +104,32 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             trials.append((after.discrepancy, cand, after))
         if not trials:
             break
-        # the best, fitted jointly: the chosen effects refitted given the candidate
-        # (a proxy chosen earlier, e.g. one group for a shared flicker, can then give way)
-        joint = []
-        for d, cand, after in sorted(trials, key=lambda t: t[0])[:JOINT]:
-            effects = _backfit(a, chosen + [cand.effect])
-            after_joint = b.compare(effects) if effects != chosen + [cand.effect] else after
-            joint.append((after_joint.discrepancy, cand, after_joint, effects))
-        d_new, cand, after, effects = min(joint, key=lambda t: t[0])
-        reps = b.replicate_discrepancies(after)
-        p = paired_p(current_reps, reps, d_prev, d_new)
-        added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
-        local = _local_gain(first_cmp, current_cmp, after)
-        if (added < MIN_ADDED and local < MIN_LOCAL) or p >= STEP_ALPHA or d_new >= d_prev:
-            rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
-                         'note': cand.note}]
+        step = None
+        for rank, (d, cand, after) in enumerate(sorted(trials, key=lambda t: t[0])):
+            effects = chosen + [cand.effect]
+            if rank < JOINT:
+                # fitted jointly: the chosen effects refitted given the candidate (a proxy
+                # chosen earlier, e.g. one group for a shared flicker, can then give way),
+                # kept unless the held-out part says the refit is worse
+                joint = _backfit(a, effects)
+                if joint != effects:
+                    after_joint = b.compare(joint)
+                    if after_joint.discrepancy < after.discrepancy:
+                        effects, after = joint, after_joint
+            d_new = after.discrepancy
+            reps = b.replicate_discrepancies(after)
+            p = paired_p(current_reps, reps, d_prev, d_new)
+            added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
+            if _counts(added, _local_gains(first_cmp, current_cmp, after), p, d_new, d_prev):
+                step = (cand, after, effects, reps, p)
+                break
+            if not rejected:
+                rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
+                             'note': cand.note}]
+        if step is None:
             break
-        chosen = effects
+        cand, after, chosen, reps, p = step
+        rejected = []
         notes.append(cand.note)
         remaining.remove(cand.name)
         current_cmp, current_reps = after, reps
@@ -135,16 +145,29 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     current_reps, rejected)
 
 
-def _local_gain(before, current, after) -> float:
-    """The largest share of one protocol's own held-out discrepancy (stationary or
-    closed-loop statistics) a step removes.  A turn error acts only on closed-loop
-    statistics, whose discrepancy can be small beside the stationary one's."""
-    best = 0.0
+def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float) -> bool:
+    """Does a step count: significant (``p < STEP_ALPHA``), lowering the discrepancy,
+    and large enough by one of three measures (see ``_local_gains``)."""
+    before_any, left = gains
+    big = added >= MIN_ADDED or before_any >= MIN_LOCAL or left >= MIN_LEFT
+    return big and p < STEP_ALPHA and d_new < d_prev
+
+
+def _local_gains(before, current, after) -> tuple:
+    """The largest share a step removes of one protocol's own held-out discrepancy
+    (stationary or closed-loop statistics): (of that part before any effect, of what
+    the chosen effects still leave of it).  A turn error acts only on closed-loop
+    statistics, whose discrepancy can be small beside the stationary one's; and once
+    the chosen effects leave a small remainder, an effect that explains much of that
+    remainder is still a small share of the gap before any effect."""
+    before_any = left = 0.0
     for closed in (False, True):
         d0, d1, d2 = (_part(c, closed) for c in (before, current, after))
         if d0 > 0:
-            best = max(best, (d1 - d2) / d0)
-    return best
+            before_any = max(before_any, (d1 - d2) / d0)
+        if d1 > 0:
+            left = max(left, (d1 - d2) / d1)
+    return before_any, left
 
 
 def _part(c, closed: bool) -> float:

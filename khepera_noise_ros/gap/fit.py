@@ -278,6 +278,10 @@ def intensity(target: Target, c: Comparison) -> Candidate:
                                           shared)
                for d, e, c0, k, _ in spreadlaw.laws(cells)]
     options = [o for o in options if o.strength > 0 or o.constant > 0]
+    # a constant part is poorly fixed by the unweighted fit (the darkest cells dominate;
+    # other effects' transients add to them): the simulator also judges each law without
+    options += [dataclasses.replace(o, constant=0.0) for o in options
+                if o.constant > 0 and o.strength > 0]
     if not options:
         return Candidate(name, None, 'extra spread fits no spread law')
     best_effect = min(options, key=lambda e: target.objective([e]))
@@ -418,18 +422,22 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     families = ('turn_response', 'sensor_turn_response', 'turn_size')
     if not any(abs(z) > Z_DETECT for family in families for *_, z in _rows(c, family)):
         return Candidate(name, None, 'the readings respond to turns as simulated')
-    # recorded headings measure the turn itself; else the readings' response to it
+    # recorded headings measure the turn itself; else the readings' response to it, at
+    # both lags (least squares): with a latency given, the lag-0 response is noise alone
     size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
-    real, sim = np.mean(size if size else rows, axis=0)
-    scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
+    real, sim = np.array(size if size else [(r, s) for k, r, s, *_ in
+                                           _rows(c, 'turn_response')]).T
+    ok = np.isfinite(real) & np.isfinite(sim)
+    real, sim = real[ok], sim[ok]
+    ratio = float(real @ sim / (sim @ sim)) if sim @ sim > 1e-18 else 1.0
+    scale0 = float(np.clip(ratio, 0.2, 2.0))
 
     def objective(scale, slip):
         return target.objective([fx.ActuatorTurnError(scale, slip)], ('closed_loop',))
-    scale = _golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
+    scale = _golden(lambda x: objective(x, 0.0), scale0 * 0.6, scale0 * 1.6, 9)
     slip = min((0.0, 0.1, 0.2, 0.35), key=lambda x: objective(scale, x))
     effect = fx.ActuatorTurnError(round(scale, 4), slip)
-    return Candidate(name, effect, f'turn response {real / sim:.2f} times the simulated'
-                     if abs(sim) > 1e-9 else 'turn response differs')
+    return Candidate(name, effect, f'turn response {ratio:.2f} times the simulated')
 
 
 FITTERS = {fx.SensorGainOffset.name: gain_offset, fx.SaturationQuantization.name: saturation,
