@@ -124,8 +124,8 @@ def diagnosis(config, recs, label: str) -> None:
     chosen = j['compound']['chosen'] if j['compound'] else []
     print(f'  {label}: gap significant {r.gap_significant}; top {r.top_effect}; best '
           f'{best}')
-    print(f'    compound: ' + ' -> '.join(f'{c["name"]} {c["cumulative_reduction"]:.2f}'
-                                         for c in chosen)
+    steps = [f'{c["name"]} {c["cumulative_reduction"]:.3f}' for c in chosen]
+    print('    compound: ' + ' -> '.join(steps)
           + (f'; rejected {j["compound"]["rejected"]}' if j['compound'] else '')
           + f'  [{time.process_time() - t0:.1f} s CPU]')
 

@@ -425,8 +425,8 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     # recorded headings measure the turn itself; else the readings' response to it, at
     # both lags (least squares): with a latency given, the lag-0 response is noise alone
     size = [(r, s) for k, r, s, se, z in _rows(c, 'turn_size')]
-    real, sim = np.array(size if size else [(r, s) for k, r, s, *_ in
-                                           _rows(c, 'turn_response')]).T
+    pairs = size if size else [(r, s) for k, r, s, *_ in _rows(c, 'turn_response')]
+    real, sim = np.array(pairs, np.float64).T
     ok = np.isfinite(real) & np.isfinite(sim)
     real, sim = real[ok], sim[ok]
     ratio = float(real @ sim / (sim @ sim)) if sim @ sim > 1e-18 else 1.0
