@@ -139,7 +139,8 @@ def main(argv=None) -> int:
     p.add_argument('--oracle-only', action='store_true')
     p.add_argument('--diagnose-only', action='store_true')
     p.add_argument('--effects', nargs='*', default=None,
-                   help='effects to study alone and left out (default: every enabled one)')
+                   help='effects to study alone and left out (default: every enabled one; none '
+                        'given: none)')
     a = p.parse_args(argv)
     robot_config = EffectsConfig.real_robot()
     print(f'recordings: {a.samples} samples per cell, {a.episodes} closed-loop episodes, '
@@ -151,7 +152,7 @@ def main(argv=None) -> int:
     if a.oracle_only:
         return 0
     diagnosis(robot_config, recs, 'default robot')
-    for name in a.effects or robot_config.enabled:
+    for name in robot_config.enabled if a.effects is None else a.effects:
         alone = robot_config.only(name)
         diagnosis(alone, recordings(alone, a.seed, a.samples, a.episodes), f'{name} alone')
         without = robot_config.only(*[n for n in robot_config.enabled if n != name])

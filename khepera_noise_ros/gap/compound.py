@@ -16,6 +16,7 @@ share.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +31,7 @@ MIN_LEFT = 0.20           # ... or this share of what the chosen effects leave o
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
+CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step is checked on
 
 
 @dataclass
@@ -120,7 +122,10 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             reps = b.replicate_discrepancies(after)
             p = paired_p(current_reps, reps, d_prev, d_new)
             added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
-            if _counts(added, _local_gains(first_cmp, current_cmp, after), p, d_new, d_prev):
+            gains = _local_gains(first_cmp, current_cmp, after)
+            if _counts(added, gains, p, d_new, d_prev) and \
+                    (added >= MIN_ADDED or gains[0] >= MIN_LOCAL
+                     or _confirmed(b, chosen, effects)):
                 step = (cand, after, effects, reps, p)
                 break
             if not rejected:
@@ -151,6 +156,20 @@ def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float) -
     before_any, left = gains
     big = added >= MIN_ADDED or before_any >= MIN_LOCAL or left >= MIN_LEFT
     return big and p < STEP_ALPHA and d_new < d_prev
+
+
+def _confirmed(b: Target, chosen: list, effects: list) -> bool:
+    """A step that counts only by what is left (``MIN_LEFT``) is checked again against a
+    second simulated side (another simulator seed): once the remainder is small the
+    simulator's own noise, which the paired bootstrap of the real data leaves out, can
+    make a step of that size."""
+    other = copy.copy(b)
+    other.seed = b.seed + CONFIRM_SEED
+    prev, new = other.compare(chosen), other.compare(effects)
+    p = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
+                 prev.discrepancy, new.discrepancy)
+    left = _local_gains(prev, prev, new)[1]
+    return p < STEP_ALPHA and left >= MIN_LEFT and new.discrepancy < prev.discrepancy
 
 
 def _local_gains(before, current, after) -> tuple:
