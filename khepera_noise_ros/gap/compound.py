@@ -27,7 +27,7 @@ from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
-MIN_LEFT = 0.20           # ... or this share of what the chosen effects leave of one protocol's
+MIN_LEFT = 0.50           # ... or most of what the chosen effects leave of one protocol's
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
