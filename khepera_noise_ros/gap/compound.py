@@ -4,15 +4,17 @@ A real robot has several unmodelled effects at once.  Starting from the best
 single effect, each step fits every remaining candidate *jointly* with those
 already chosen (the simulator the candidate is fitted against already has
 them, ``Target.with_given``), scores simulator + chosen + candidate on the
-held-out part, and keeps the best candidate only if it lowers the held-out
-discrepancy significantly: by at least ``MIN_ADDED`` of the discrepancy before
-any effect (or ``MIN_LOCAL`` of one protocol's own: a turn error acts only on the
-closed-loop statistics), and in ``1 - alpha`` of the paired bootstrap replicates (the same
-resampled real data against both simulators).  After each addition the
-effects chosen earlier are refitted given the others (one backfitting pass),
-kept only where that lowers the *fitting* part's discrepancy, so the held-out
-part stays unseen.  Selection stops when no candidate adds a significant
-share.
+held-out part, and keeps a candidate (the best first, then the next) only if
+it lowers the held-out discrepancy significantly: by at least ``MIN_ADDED`` of
+the discrepancy before any effect, or ``MIN_LOCAL`` of one protocol's own (a
+turn error acts only on the closed-loop statistics), or ``MIN_LEFT`` of what
+the chosen effects leave of one protocol's (checked again on a second
+simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
+same resampled real data against both simulators).  With the best candidate
+the effects chosen earlier are refitted given the others (one backfitting
+pass), each refit kept only where it lowers the *fitting* part's discrepancy,
+the refitted set only where the held-out one does not rise.  Selection stops
+when no candidate adds a significant share.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
-MIN_LEFT = 0.50           # ... or most of what the chosen effects leave of one protocol's
+MIN_LEFT = 0.50           # ... or of what the chosen effects leave of one protocol's part
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
