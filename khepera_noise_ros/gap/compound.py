@@ -4,18 +4,21 @@ A real robot has several unmodelled effects at once.  Starting from the best
 single effect, each step fits every remaining candidate *jointly* with those
 already chosen (the simulator the candidate is fitted against already has
 them, ``Target.with_given``), scores simulator + chosen + candidate on the
-held-out part, and keeps the best candidate only if it lowers the held-out
-discrepancy significantly: by at least ``MIN_ADDED`` of the discrepancy before
-any effect (or ``MIN_LOCAL`` of one protocol's own: a turn error acts only on the
-closed-loop statistics), and in ``1 - alpha`` of the paired bootstrap replicates (the same
-resampled real data against both simulators).  After each addition the
-effects chosen earlier are refitted given the others (one backfitting pass),
-kept only where that lowers the *fitting* part's discrepancy, so the held-out
-part stays unseen.  Selection stops when no candidate adds a significant
-share.
+held-out part, and keeps a candidate (the best first, then the next) only if
+it lowers the held-out discrepancy significantly: by at least ``MIN_ADDED`` of
+the discrepancy before any effect, or ``MIN_LOCAL`` of one protocol's own (a
+turn error acts only on the closed-loop statistics), or ``MIN_LEFT`` of what
+the chosen effects leave of one protocol's (checked again on a second
+simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
+same resampled real data against both simulators).  With the best candidate
+the effects chosen earlier are refitted given the others (one backfitting
+pass), each refit kept only where it lowers the *fitting* part's discrepancy,
+the refitted set only where the held-out one does not rise.  Selection stops
+when no candidate adds a significant share.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,9 +29,11 @@ from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
+MIN_LEFT = 0.50           # ... or of what the chosen effects leave of one protocol's part
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
+CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step is checked on
 
 
 @dataclass
@@ -51,7 +56,7 @@ class Compound:
         return {'chosen': self.steps, 'discrepancy_before': self.discrepancy_before,
                 'discrepancy_after': self.discrepancy_after,
                 'heldout_reduction': self.reduction, 'rejected': self.rejected,
-                'min_added': MIN_ADDED, 'step_alpha': STEP_ALPHA}
+                'min_added': MIN_ADDED, 'min_left': MIN_LEFT, 'step_alpha': STEP_ALPHA}
 
 
 def entry(effect, note: str, d_before: float, d_after: float, d_prev: float,
@@ -103,23 +108,35 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             trials.append((after.discrepancy, cand, after))
         if not trials:
             break
-        # the best, fitted jointly: the chosen effects refitted given the candidate
-        # (a proxy chosen earlier, e.g. one group for a shared flicker, can then give way)
-        joint = []
-        for d, cand, after in sorted(trials, key=lambda t: t[0])[:JOINT]:
-            effects = _backfit(a, chosen + [cand.effect])
-            after_joint = b.compare(effects) if effects != chosen + [cand.effect] else after
-            joint.append((after_joint.discrepancy, cand, after_joint, effects))
-        d_new, cand, after, effects = min(joint, key=lambda t: t[0])
-        reps = b.replicate_discrepancies(after)
-        p = paired_p(current_reps, reps, d_prev, d_new)
-        added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
-        local = _local_gain(first_cmp, current_cmp, after)
-        if (added < MIN_ADDED and local < MIN_LOCAL) or p >= STEP_ALPHA or d_new >= d_prev:
-            rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
-                         'note': cand.note}]
+        step = None
+        for rank, (d, cand, after) in enumerate(sorted(trials, key=lambda t: t[0])):
+            effects = chosen + [cand.effect]
+            if rank < JOINT:
+                # fitted jointly: the chosen effects refitted given the candidate (a proxy
+                # chosen earlier, e.g. one group for a shared flicker, can then give way),
+                # kept unless the held-out part says the refit is worse
+                joint = _backfit(a, effects)
+                if joint != effects:
+                    after_joint = b.compare(joint)
+                    if after_joint.discrepancy < after.discrepancy:
+                        effects, after = joint, after_joint
+            d_new = after.discrepancy
+            reps = b.replicate_discrepancies(after)
+            p = paired_p(current_reps, reps, d_prev, d_new)
+            added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
+            gains = _local_gains(first_cmp, current_cmp, after)
+            if _counts(added, gains, p, d_new, d_prev) and \
+                    (added >= MIN_ADDED or gains[0] >= MIN_LOCAL
+                     or _confirmed(b, chosen, effects)):
+                step = (cand, after, effects, reps, p)
+                break
+            if not rejected:
+                rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
+                             'note': cand.note}]
+        if step is None:
             break
-        chosen = effects
+        cand, after, chosen, reps, p = step
+        rejected = []
         notes.append(cand.note)
         remaining.remove(cand.name)
         current_cmp, current_reps = after, reps
@@ -135,16 +152,43 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     current_reps, rejected)
 
 
-def _local_gain(before, current, after) -> float:
-    """The largest share of one part's own held-out discrepancy (stationary, closed-loop,
-    or closed-loop noise statistics) a step removes.  A turn error acts only on closed-loop
-    statistics, whose discrepancy can be small beside the stationary one's."""
-    best = 0.0
+def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float) -> bool:
+    """Does a step count: significant (``p < STEP_ALPHA``), lowering the discrepancy,
+    and large enough by one of three measures (see ``_local_gains``)."""
+    before_any, left = gains
+    big = added >= MIN_ADDED or before_any >= MIN_LOCAL or left >= MIN_LEFT
+    return big and p < STEP_ALPHA and d_new < d_prev
+
+
+def _confirmed(b: Target, chosen: list, effects: list) -> bool:
+    """A step that counts only by what is left (``MIN_LEFT``) is checked again against a
+    second simulated side (another simulator seed): once the remainder is small the
+    simulator's own noise, which the paired bootstrap of the real data leaves out, can
+    make a step of that size."""
+    other = copy.copy(b)
+    other.seed = b.seed + CONFIRM_SEED
+    prev, new = other.compare(chosen), other.compare(effects)
+    p = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
+                 prev.discrepancy, new.discrepancy)
+    left = _local_gains(prev, prev, new)[1]
+    return p < STEP_ALPHA and left >= MIN_LEFT and new.discrepancy < prev.discrepancy
+
+
+def _local_gains(before, current, after) -> tuple:
+    """The largest share a step removes of one part's own held-out discrepancy
+    (stationary, closed-loop, or closed-loop noise statistics): (of that part before any
+    effect, of what the chosen effects still leave of it).  A turn error acts only on
+    closed-loop statistics, whose discrepancy can be small beside the stationary one's; and once
+    the chosen effects leave a small remainder, an effect that explains much of that
+    remainder is still a small share of the gap before any effect."""
+    before_any = left = 0.0
     for part in ('stationary', 'closed_loop', 'closed_loop_noise'):
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
-            best = max(best, (d1 - d2) / d0)
-    return best
+            before_any = max(before_any, (d1 - d2) / d0)
+        if d1 > 0:
+            left = max(left, (d1 - d2) / d1)
+    return before_any, left
 
 
 def _part(c, part: str) -> float:

@@ -236,6 +236,10 @@ def intensity(target: Target, c: Comparison) -> Candidate:
                                           shared)
                for d, e, c0, k, _ in spreadlaw.laws(cells)]
     options = [o for o in options if o.strength > 0 or o.constant > 0]
+    # a constant part is poorly fixed by the unweighted fit (the darkest cells dominate;
+    # other effects' transients add to them): the simulator also judges each law without
+    options += [dataclasses.replace(o, constant=0.0) for o in options
+                if o.constant > 0 and o.strength > 0]
     if not options:
         return Candidate(name, None, 'extra spread fits no spread law')
     best_effect = min(options, key=lambda e: target.objective([e]))

@@ -36,10 +36,16 @@ def actuator(target: Target, c: Comparison) -> Candidate:
                    if (z if f in SCATTER else abs(z)) > Z_DETECT] for f in FAMILIES}
     if not any(flagged.values()):
         return Candidate(name, None, 'the readings respond to turns as simulated')
-    # recorded headings measure the turn itself; else the readings' response to it
+    # recorded headings measure the turn itself; else the readings' response to it, at
+    # both lags (least squares): with a latency given, the lag-0 response is noise alone
     size = [(r, s) for k, r, s, se, z in rows(c, 'turn_size')]
-    real, sim = np.mean(size if size else response, axis=0)
-    scale0 = float(np.clip(real / sim, 0.2, 2.0)) if abs(sim) > 1e-9 else 1.0
+    pairs = np.array(size if size else [(r, s) for k, r, s, *_ in rows(c, 'turn_response')],
+                     np.float64)
+    pairs = pairs[np.isfinite(pairs).all(axis=1)]
+    real, sim = pairs.T if pairs.size else (np.zeros(1), np.zeros(1))
+    ratio = float(real @ sim / (sim @ sim)) if sim @ sim > 1e-18 else 1.0
+    scale0 = float(np.clip(ratio, 0.2, 2.0))
+    real, sim = ratio, 1.0                  # the note gives the ratio
     still = band_label(BANDS[0])
     creep_seen = any(k.part == still for f in SCATTER
                      for k in flagged[f])
@@ -48,7 +54,7 @@ def actuator(target: Target, c: Comparison) -> Candidate:
         return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
     # the creep first where power 0 shows it (there the slip cannot act), then the
     # slip given it, the scale once more, and the creep given both
-    scale = golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
+    scale = golden(lambda x: objective(x, 0.0), scale0 * 0.6, scale0 * 1.6, 9)
     creep = _creep(lambda x: objective(scale, 0.0, x)) if creep_seen else 0.0
     slip = golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
     scale = golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)

@@ -1,0 +1,165 @@
+"""Which of the emulated robot's default effects its recordings can show (prints figures).
+
+    python benchmark/emulated_set.py [--samples 60] [--episodes 30] [--seed 3]
+                                     [--oracle-only] [--diagnose-only]
+
+Recordings as test/test_gap_compound.py records them (stationary, ``--samples`` per
+heading and condition; closed loop, ``--episodes`` episodes, headings unknown).
+
+oracle     the robot's own effects, with their true parameters, put into the
+           simulator: held-out discrepancy with all six, and with each one left out
+           (p: paired bootstrap, that leaving it out does not raise the discrepancy).
+           An effect whose absence raises nothing beyond the noise cannot be found.
+diagnose   the diagnosis of the robot with one effect alone, and with every default
+           effect but one: the single best effect and the compound chosen.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(var, '1')
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
+
+import numpy as np  # noqa: E402
+from blind_gap import STATIONARY, record_closed_loop, record_stationary, robot  # noqa: E402
+from test_gap_support import GENOME  # noqa: E402
+
+from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
+from khepera_noise_ros.gap import compound, diagnose, split  # noqa: E402
+from khepera_noise_ros.gap import effects as fx  # noqa: E402
+from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.gap.target import Target  # noqa: E402
+from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
+
+EIGHT = tuple(range(8))
+
+
+def recordings(config, seed: int, samples: int, episodes: int) -> list:
+    world = robot(config, seed)
+    return [record_stationary(world, STATIONARY, samples=samples),
+            record_closed_loop(world, np.array(GENOME), episodes=episodes, seed=seed)]
+
+
+def simulator(config) -> SimConfig:
+    return SimConfig(noise=NoiseModel.independent_only(config.sensor_noise))
+
+
+def true_effects(config) -> dict:
+    """The robot's enabled effects in the diagnosis's vocabulary, true parameters."""
+    out = {}
+    c = config.correlated_noise
+    if c.enabled:
+        out['correlated_noise'] = fx.CorrelatedNoise(tuple(map(tuple, c.location)), c.strength)
+    f = config.intensity_dependent_noise
+    if f.enabled:
+        out['intensity_dependent_noise'] = fx.IntensityDependentNoise(
+            tuple(f.location), f.strength, f.exponent, 525.0, 0.0, 'dark', True)
+    g = config.sensor_gain_offset
+    if g.enabled:
+        draws = np.random.default_rng([g.unit_seed]).standard_normal((2, 8))
+        out['sensor_gain_offset'] = fx.SensorGainOffset(
+            EIGHT, tuple(np.round(1 + g.strength * draws[0], 5)),
+            tuple(np.round(g.offset_sd * draws[1], 4)))
+    d = config.temporal_drift
+    if d.enabled:
+        out['temporal_drift'] = fx.TemporalDrift(tuple(d.location), d.strength,
+                                                 d.time_constant, d.shared)
+    t = config.actuator_turn_error
+    if t.enabled:
+        out['actuator_turn_error'] = fx.ActuatorTurnError(t.scale, t.strength)
+    s = config.sensor_latency
+    if s.enabled:
+        out['sensor_latency'] = fx.SensorLatency(tuple(s.location), s.strength)
+    return out
+
+
+def parts(recs, config, seed: int = 0, replicates: int = 100):
+    """The fitting and held-out targets, made as ``diagnose`` makes them."""
+    full = Target(recs, simulator(config), seed, 'auto', replicates=replicates)
+    fit_part, test_part = split.split(recs, ())
+    return [Target([r for _, r in part], simulator(config), seed + k, 'auto',
+                   replicates=replicates,
+                   block_lengths=[full.block_lengths[i] for i, _ in part])
+            for k, part in ((1, fit_part), (2, test_part))]
+
+
+def oracle(config, recs, sim_seeds: int = 1) -> None:
+    """Per simulator seed (the simulated side's own noise), what leaving each true
+    effect out adds to the held-out discrepancy of all six."""
+    true = true_effects(config)
+    rows: dict = {name: [] for name in true}
+    for seed in range(sim_seeds):
+        _, b = parts(recs, config, seed)
+        before = b.compare()
+        all_cmp = b.compare(list(true.values()))
+        all_reps = b.replicate_discrepancies(all_cmp)
+        d0, d_all = before.discrepancy, all_cmp.discrepancy
+        print(f'  sim seed {seed}: held-out discrepancy none {d0:.1f}, all six true '
+              f'{d_all:.1f} (shrink {1 - d_all / d0:.3f})')
+        for name in true:
+            rest = b.compare([e for n, e in true.items() if n != name])
+            reps = b.replicate_discrepancies(rest)
+            p = compound.paired_p(reps, all_reps, rest.discrepancy, d_all)
+            closed = compound._part(rest, True) - compound._part(all_cmp, True)
+            rows[name].append((rest.discrepancy - d_all, (rest.discrepancy - d_all) / d_all,
+                               p, closed))
+    for name, r in rows.items():
+        r = np.array(r)
+        print(f'  without {name:27s} adds {r[:, 0].mean():+9.1f} (sd {r[:, 0].std():7.1f}) '
+              f'= {r[:, 1].mean():+7.1%} of all-six\'s; p <= 0.05 in {np.sum(r[:, 2] <= 0.05)}'
+              f'/{len(r)}; closed-loop part {r[:, 3].mean():+8.1f}')
+
+
+def diagnosis(config, recs, label: str) -> None:
+    t0 = time.process_time()
+    r = diagnose.diagnose(recs, diagnose.Options(config=simulator(config), replicates=100))
+    j = r.to_json()
+    best = ', '.join(f'{e["name"]} {e["heldout_reduction"]:.2f}' for e in r.effects[:3])
+    chosen = j['compound']['chosen'] if j['compound'] else []
+    print(f'  {label}: gap significant {r.gap_significant}; top {r.top_effect}; best '
+          f'{best}')
+    steps = [f'{c["name"]} {c["cumulative_reduction"]:.3f}' for c in chosen]
+    print('    compound: ' + ' -> '.join(steps)
+          + (f'; rejected {j["compound"]["rejected"]}' if j['compound'] else '')
+          + f'  [{time.process_time() - t0:.1f} s CPU]')
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--samples', type=int, default=60)
+    p.add_argument('--episodes', type=int, default=30)
+    p.add_argument('--seed', type=int, default=3)
+    p.add_argument('--sim-seeds', type=int, default=1)
+    p.add_argument('--oracle-only', action='store_true')
+    p.add_argument('--diagnose-only', action='store_true')
+    p.add_argument('--effects', nargs='*', default=None,
+                   help='effects to study alone and left out (default: every enabled one; none '
+                        'given: none)')
+    a = p.parse_args(argv)
+    robot_config = EffectsConfig.real_robot()
+    print(f'recordings: {a.samples} samples per cell, {a.episodes} closed-loop episodes, '
+          f'seed {a.seed}')
+    recs = recordings(robot_config, a.seed, a.samples, a.episodes)
+    if not a.diagnose_only:
+        print('oracle (true parameters) on the default robot:')
+        oracle(robot_config, recs, a.sim_seeds)
+    if a.oracle_only:
+        return 0
+    diagnosis(robot_config, recs, 'default robot')
+    for name in robot_config.enabled if a.effects is None else a.effects:
+        alone = robot_config.only(name)
+        diagnosis(alone, recordings(alone, a.seed, a.samples, a.episodes), f'{name} alone')
+        without = robot_config.only(*[n for n in robot_config.enabled if n != name])
+        diagnosis(without, recordings(without, a.seed, a.samples, a.episodes),
+                  f'without {name}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
