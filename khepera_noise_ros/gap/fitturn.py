@@ -54,7 +54,7 @@ def actuator(target: Target, c: Comparison) -> Candidate:
         return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
     # the creep first where power 0 shows it (there the slip cannot act), then the
     # slip given it, the scale once more, and the creep given both
-    scale = golden(lambda x: objective(x, 0.0), scale0 * 0.6, scale0 * 1.6, 9)
+    scale = golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
     creep = _creep(lambda x: objective(scale, 0.0, x)) if creep_seen else 0.0
     slip = golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
     scale = golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
