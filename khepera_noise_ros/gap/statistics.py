@@ -88,6 +88,8 @@ def _layout(rec: Recording, length: int) -> dict:
     labels, cell = cells(rec)
     runs = units(rec, cell)
     order = np.concatenate(runs)
+    run_sizes = np.array([r.size for r in runs], np.int64)
+    run_at = (order, np.r_[0, np.cumsum(run_sizes)[:-1]], run_sizes)
     run_of = np.repeat(np.arange(len(runs)), [r.size for r in runs])
     position = np.concatenate([np.arange(r.size) for r in runs])
     block_key = run_of * (position.max() // length + 2) + position // length
@@ -101,7 +103,8 @@ def _layout(rec: Recording, length: int) -> dict:
     block_of[order] = block
     stratum = np.zeros(nb, np.int64)
     stratum[block] = cell[order]
-    out = {'labels': labels, 'cell': cell, 'runs': runs, 'order': order, 'block': block,
+    out = {'labels': labels, 'cell': cell, 'runs': runs, 'run_at': run_at,
+           'order': order, 'block': block,
            'nb': nb, 'block_of': block_of, 'stratum': stratum,
            'lags': _lag_pairs(rec.step[order], run_of)}
     _LAYOUTS[key] = (cols, out)
@@ -117,9 +120,12 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     labels, cell, runs = lay['labels'], lay['cell'], lay['runs']
     order, block, nb = lay['order'], lay['block'], lay['nb']
     x = rec.readings[:, list(channels)].astype(np.float64)
-    y = x.copy()
-    for r in runs:                     # residuals about each run's own mean: the same
-        y[r] -= x[r].mean(axis=0)      # small bias for real and simulated runs alike
+    # residuals about each run's own mean: the same small bias for real and simulated
+    # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
+    run_order, run_starts, run_sizes = lay['run_at']
+    run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
+    y = np.empty_like(x)
+    y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
     yo, xo = y[order], x[order]
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
@@ -142,14 +148,15 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
     parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
-    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb)
+    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb,
+                                                           run_means)
     sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
                   {'integer': integer})
 
 
 def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of: np.ndarray,
-                 blocks: int) -> tuple[np.ndarray, np.ndarray]:
+                 blocks: int, run_means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Step responses where a run follows another in the same episode without a gap.
 
     For the j-th sample after the change, d = x - (new run's mean) against the change
@@ -159,8 +166,10 @@ def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of
     """
     dd = np.zeros((blocks, STEP_LAGS, x.shape[1]))
     d2 = np.zeros((blocks, STEP_LAGS, x.shape[1]))
-    starts = sorted(runs, key=lambda r: (int(rec.episode[r[0]]), int(rec.step[r[0]])))
-    means = [x[r].mean(axis=0) for r in starts]
+    by_start = sorted(range(len(runs)),
+                      key=lambda i: (int(rec.episode[runs[i][0]]), int(rec.step[runs[i][0]])))
+    starts = [runs[i] for i in by_start]
+    means = run_means[by_start]
     for i, (old, new) in enumerate(zip(starts[:-1], starts[1:])):
         b = block_of[new[0]]
         if rec.episode[old[0]] != rec.episode[new[0]] or b < 0 or \
