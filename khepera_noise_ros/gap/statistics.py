@@ -150,7 +150,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     parts['residue'] = _block_sum(block, residue, nb)
     parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb,
-                                                           run_means)
+                                                      run_means)
     sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
                   {'integer': integer})
@@ -246,11 +246,6 @@ def _modal_residues(x: np.ndarray, residues: np.ndarray | None = None) -> np.nda
         code = (r[:, :, j].astype(np.int64) + q * columns).ravel()
         out[:, j] = np.bincount(code, minlength=q * x.shape[1]).reshape(-1, q).argmax(axis=1)
     return out
-
-
-def _residue_hits(x: np.ndarray, modal: np.ndarray) -> np.ndarray:
-    """(N, C, len(MODULI)) 1 where a reading falls in its channel's modal residue class."""
-    return (_residues(x) == modal[None]).astype(np.float32)
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
