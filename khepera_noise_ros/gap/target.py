@@ -11,7 +11,6 @@ deterministic function of the effect's parameters.
 from __future__ import annotations
 
 import copy
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,7 +28,6 @@ SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of
 # error ignores where an end falls, which a slow change moves, so only a limit is fitted
 # to it.
 LIMITS_ONLY = frozenset({'pileup'})
-SIM_CACHE = 64           # simulated statistics kept per target (see ``Target._simulated``)
 
 
 @dataclass
@@ -44,10 +42,8 @@ class Target:
     given: tuple = ()             # effects already chosen: the simulator always has them
     real: Stats = field(init=False)
     kinds: list[str] = field(init=False)
-    cache_size: int = SIM_CACHE   # 0: no memo of simulated statistics
 
     def __post_init__(self):
-        self._cache: OrderedDict = OrderedDict()   # shared by shallow copies: keyed fully
         if self.copies is None:       # enough simulated samples, not more: fits cost less
             n = sum(len(r) for r in self.recordings)
             self.copies = int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
@@ -76,37 +72,8 @@ class Target:
                    copies: int | None = None) -> tuple[Stats, np.ndarray]:
         """Simulated statistics of all copies together, and per statistic the factor by
         which the block bootstrap understates the variance of cell levels (see
-        ``_level_inflation``).  Memoised: a fit and the compound selection ask for the
-        same effect set again; with common random numbers the answer is the same."""
+        ``_level_inflation``)."""
         copies = self.copies if copies is None else copies
-        key = self._cache_key(effects, replicates, kinds, copies)
-        if key is not None and key in self._cache:
-            self._cache.move_to_end(key)
-            return self._cache[key]
-        out = self._simulate_stats(effects, replicates, kinds, copies)
-        if key is not None:
-            self._cache[key] = out
-            while len(self._cache) > self.cache_size:
-                self._cache.popitem(last=False)
-        return out
-
-    def _cache_key(self, effects, replicates, kinds, copies):
-        """Everything the simulated statistics depend on; None (no memo) when an effect
-        is not hashable or the cache is off."""
-        if self.cache_size <= 0:
-            return None
-        key = (tuple(self.given), tuple(effects), replicates,
-               None if kinds is None else kinds if isinstance(kinds, str) else frozenset(kinds),
-               copies, self.seed, self.base,
-               id(self.config), id(self.recordings), tuple(self.block_lengths))
-        try:
-            hash(key)
-        except TypeError:
-            return None
-        return key
-
-    def _simulate_stats(self, effects, replicates: int, kinds,
-                        copies: int) -> tuple[Stats, np.ndarray]:
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
             s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config),
