@@ -1,8 +1,8 @@
 """Closed-loop compound cases with recorded headings (prints figures; not a test).
 
-    python benchmark/closed_noise.py [--cases 16] [--seed 0]
+    python benchmark/closed_noise.py [--cases 16] [--seed 0] [--episodes 24]
 
-Each case is a closed-loop recording of the light-centring task (24 episodes of 60
+Each case is a closed-loop recording of the light-centring task (``--episodes``, default 24, of 60
 steps, headings kept, as from a tracked robot) made by the simulator with hidden
 effects: one that acts on the turns (sensor latency of 1-2 steps on every sensor, or
 a turn error) and one sensor effect (fast noise shared by a random non-adjacent pair,
@@ -52,6 +52,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cases', type=int, default=16)
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--episodes', type=int, default=24)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     options = diagnose.Options(config=CONFIG, replicates=60)
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
     start = time.process_time()
     for case in range(args.cases):
         hidden = draw(rng)
-        rec = replay.replay(closed_loop_protocol(24), CONFIG, hidden, seed=1000 + case)
+        rec = replay.replay(closed_loop_protocol(args.episodes), CONFIG, hidden, seed=1000 + case)
         rec.manifest = dict(rec.manifest, source='emulator')
         out = diagnose.diagnose([rec], options).to_json()
         chosen = [c['name'] for c in (out['compound'] or {}).get('chosen', [])]

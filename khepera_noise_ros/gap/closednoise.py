@@ -259,3 +259,17 @@ def spread_cells(c, sensors, real) -> list:
         elif (k.sensors, k.condition) in level:
             out.append((level[(k.sensors, k.condition)], excess))
     return out
+
+
+def shared_strength(c, groups, real) -> float | None:
+    """Moment estimate of shared noise sd as a fraction of the group's mean level, from
+    the closed-loop spreads (``spread_cells``): excess variance over squared level, for a
+    recording with no stationary statistics; None without usable cells."""
+    num = den = 0.0
+    for g in groups:
+        cells = spread_cells(c, set(g), real)
+        if cells:
+            level = np.array([v for v, _ in cells])
+            num += max(float(np.sum([e for _, e in cells])), 0.0)
+            den += float(np.sum(level * level))
+    return float(np.sqrt(num / den)) if num > 0 and den > 0 else None

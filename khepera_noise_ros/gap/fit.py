@@ -164,7 +164,10 @@ def correlated(target: Target, c: Comparison) -> Candidate:
     if not groups:
         return Candidate(name, None, 'no sensors whose noise is more correlated than simulated')
     start = _shared_strength(c, groups)
-    effect = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), s), start)
+    first = start
+    if not _rows(c, 'correlation'):   # closed loop only: the default start caps the search
+        first = closednoise.shared_strength(c, groups, target.real) or start
+    effect = _refine(target, lambda s: fx.CorrelatedNoise(tuple(groups), s), first)
     # shared noise of a fixed size in readings (a supply, a converter), not a share of
     # the level: one more form of the same effect, kept if the simulator says so
     level = np.mean([r for k, r, *_ in _rows(c, 'level')] or [ANCHOR / 2])
