@@ -17,7 +17,7 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
     conditions = rec.conditions()
     heading_known = bool(np.isfinite(rec.heading_deg).all())
     rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
-                                             'right', 'xtx', 'xty', 'xty_sensor', 'heading',
+                                             'right', 'xtx', 'xty', 'xty_sensor',
                                              'scatter_n', 'scatter_xx', 'scatter_xy',
                                              'scatter_yy', 'heading_band')}
     stratum = []
@@ -42,8 +42,6 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
         rows['xtx'].append(xtx)
         rows['xty'].append(xty)
         rows['xty_sensor'].append(xty_sensor)
-        rows['heading'].append(_heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
-                               if heading_known else np.zeros(2))
         rows['heading_band'].append(
             turnscatter.heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
             if heading_known else turnscatter.empty_heading())
@@ -78,15 +76,6 @@ def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every
     return x.T @ x, x.T @ dy, x.T @ dr, turnscatter.response_moments(r, u, ok)
 
 
-def _heading_moments(heading: np.ndarray, u: np.ndarray, steps: np.ndarray,
-                     perturb_every: int) -> np.ndarray:
-    """(sum u^2, sum u * dh) over consecutive unperturbed steps: turn per unit of command."""
-    ok = np.flatnonzero(np.diff(steps) == 1)
-    dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
-    keep = (steps[ok + 1] % perturb_every) != 0
-    return np.array([(u[ok][keep] ** 2).sum(), (u[ok][keep] * dh[keep]).sum()])
-
-
 def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
     keys, cols = [], []
     n = b.part(sums, 'n')[..., 0]
@@ -118,16 +107,14 @@ def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
             for j, lag in enumerate(('lag 0', 'lag 1')):
                 keys.append(Key('sensor_turn_response', (k,), c, lag))
                 cols.append(beta_s[:, j, k])
-        if b.extra['heading']:
-            h = b.part(sums, 'heading')[:, s]
+        if b.extra['heading']:          # every power 0..9 is in one band: sum the bands
+            h = b.part(sums, 'heading_band')[:, s].sum(axis=1)  # (R, 4): n, u^2, u dh, dh^2
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
-            cols.append(h[:, 1] / h[:, 0])
-        more = closednoise.stats(b, sums, s, c)
-        keys += more[0]
-        cols += more[1]
-        more_keys, more_cols = turnscatter.scatter_stats(b, sums, s, c)
-        keys += more_keys
-        cols += more_cols
+            cols.append(h[:, 2] / h[:, 1])
+        for more in (closednoise.stats, turnscatter.scatter_stats):
+            more_keys, more_cols = more(b, sums, s, c)
+            keys += more_keys
+            cols += more_cols
     return Stats(keys, np.stack(cols, axis=1))
 
 

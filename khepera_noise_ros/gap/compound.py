@@ -125,9 +125,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             p = paired_p(current_reps, reps, d_prev, d_new)
             added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
             gains = _local_gains(first_cmp, current_cmp, after)
-            if _counts(added, gains, p, d_new, d_prev) and \
-                    (added >= MIN_ADDED or gains[0] >= MIN_LOCAL
-                     or _confirmed(b, chosen, effects)):
+            if _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects)):
                 step = (cand, after, effects, reps, p)
                 break
             if not rejected:
@@ -152,12 +150,17 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     current_reps, rejected)
 
 
-def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float) -> bool:
+def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float,
+            confirmed) -> bool:
     """Does a step count: significant (``p < STEP_ALPHA``), lowering the discrepancy,
-    and large enough by one of three measures (see ``_local_gains``)."""
+    and large enough by one of three measures (see ``_local_gains``); one large only by
+    what is left must also be ``confirmed()``."""
+    if p >= STEP_ALPHA or d_new >= d_prev:
+        return False
     before_any, left = gains
-    big = added >= MIN_ADDED or before_any >= MIN_LOCAL or left >= MIN_LEFT
-    return big and p < STEP_ALPHA and d_new < d_prev
+    if added >= MIN_ADDED or before_any >= MIN_LOCAL:
+        return True
+    return left >= MIN_LEFT and confirmed()
 
 
 def _confirmed(b: Target, chosen: list, effects: list) -> bool:

@@ -45,7 +45,6 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     real, sim = pairs.T if pairs.size else (np.zeros(1), np.zeros(1))
     ratio = float(real @ sim / (sim @ sim)) if sim @ sim > 1e-18 else 1.0
     scale0 = float(np.clip(ratio, 0.2, 2.0))
-    real, sim = ratio, 1.0                  # the note gives the ratio
     still = band_label(BANDS[0])
     creep_seen = any(k.part == still for f in SCATTER
                      for k in flagged[f])
@@ -61,7 +60,7 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     creep = _creep(lambda x: objective(scale, slip, x)) if creep_seen else 0.0
     scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4), round(creep, 3))
     effect = fx.ActuatorTurnError(scale, slip, creep=creep)
-    return Candidate(name, effect, _note(real, sim, flagged, effect))
+    return Candidate(name, effect, _note(ratio, flagged, effect))
 
 
 def _creep(f) -> float:
@@ -84,10 +83,9 @@ def _simplest(objective, scale: float, slip: float, creep: float) -> tuple:
     return tuple(out)
 
 
-def _note(real: float, sim: float, flagged: dict, effect) -> str:
-    ratio = f'turn response {real / sim:.2f} times the simulated' if abs(sim) > 1e-9 \
-        else 'turn response differs'
+def _note(ratio: float, flagged: dict, effect) -> str:
+    note = f'turn response {ratio:.2f} times the simulated'
     scatter = [k.part for f in SCATTER for k in flagged[f]]
     if scatter:
-        ratio += f'; turns scatter more than simulated ({", ".join(sorted(set(scatter)))})'
-    return f'{ratio}: scale {effect.scale:g}, slip {effect.slip:g}, creep {effect.creep:g} deg'
+        note += f'; turns scatter more than simulated ({", ".join(sorted(set(scatter)))})'
+    return f'{note}: scale {effect.scale:g}, slip {effect.slip:g}, creep {effect.creep:g} deg'
