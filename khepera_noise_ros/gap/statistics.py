@@ -14,6 +14,7 @@ simulated data of the same protocol give the same keys, so they line up.
 """
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 
 import numpy as np
@@ -257,13 +258,16 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
 
 def weights(blocks: Blocks, replicates: int, rng: np.random.Generator) -> np.ndarray:
     """(1 + R, B) block weights: the full data, then stratified bootstrap draws."""
-    w = np.zeros((1 + replicates, blocks.stratum.size))
-    w[0] = 1.0
+    b = blocks.stratum.size
+    codes = []
     for lo, hi in zip(blocks.edges[:-1], blocks.edges[1:]):
         if replicates and hi > lo:
             picks = rng.integers(lo, hi, size=(replicates, hi - lo))
-            rows = np.repeat(np.arange(1, replicates + 1), hi - lo)
-            np.add.at(w, (rows, picks.ravel()), 1.0)
+            codes.append((np.arange(1, replicates + 1)[:, None] * b + picks).ravel())
+    w = np.bincount(np.concatenate(codes), minlength=(1 + replicates) * b) if codes else \
+        np.zeros((1 + replicates) * b)
+    w = w.reshape(1 + replicates, b).astype(np.float64)
+    w[0] = 1.0
     return w
 
 
@@ -278,9 +282,18 @@ def stratum_sums(blocks: Blocks, w: np.ndarray) -> np.ndarray:
         if used.any():
             out[used] += np.add.reduceat(blocks.sums, lo[used], axis=0)
         return out[None]
+    # Blocks are sorted by stratum, so row (replicate, stratum) of the selection matrix
+    # holds that stratum's blocks in order; built directly in CSR form.  Blocks a
+    # replicate did not draw (weight 0, a third of them) are left out: adding 0 x a
+    # finite sum changes nothing, so only when every sum is finite.
+    data = w.ravel()
+    indices = np.tile(np.arange(b), r)
     rows = (np.arange(r)[:, None] * strata + blocks.stratum[None, :]).ravel()
-    pick = sparse.csr_matrix((w.ravel(), (rows, np.tile(np.arange(b), r))),
-                             shape=(r * strata, b))
+    if np.isfinite(blocks.sums).all():
+        drawn = data != 0.0
+        data, indices, rows = data[drawn], indices[drawn], rows[drawn]
+    indptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=r * strata))]
+    pick = sparse.csr_matrix((data, indices, indptr), shape=(r * strata, b))
     return np.asarray(pick @ blocks.sums).reshape(r, strata, -1)
 
 
@@ -302,67 +315,74 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
     cell_var = np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1)
     conditions = list(dict.fromkeys(c for c, _ in b.strata))
     ch = b.channels
-    keys, cols = [], []
-
-    def add(key: Key, value: np.ndarray) -> None:
-        keys.append(key)
-        cols.append(value)
-
+    r = sums.shape[0]
+    # columns in the order of ``_stationary_keys``
     cell_sd = np.sqrt(cell_var)
-    for s, (c, h) in enumerate(b.strata):
-        part = None if h is None else f'heading {h:g} deg'
-        for k, sensor in enumerate(ch):
-            add(Key('level', (sensor,), c, part), level[:, s, k])
-            add(Key('spread', (sensor,), c, part), cell_sd[:, s, k])
+    cols = [np.stack([level, cell_sd], axis=3).reshape(r, -1)]
+    pairs = np.triu_indices(len(ch), 1)
+    members = {c: [s for s, lab in enumerate(b.strata) if lab[0] == c] for c in conditions}
     for c in conditions:
-        members = [s for s, lab in enumerate(b.strata) if lab[0] == c]
-        dof = (n[:, members] - 1).sum(axis=1)
-        cov = centred[:, members].sum(axis=1) / dof[:, None, None]
+        m = members[c]
+        dof = (n[:, m] - 1).sum(axis=1)
+        cov = centred[:, m].sum(axis=1) / dof[:, None, None]
         var = np.diagonal(cov, axis1=-2, axis2=-1)
         sd = np.sqrt(var)
         corr = cov / (sd[:, :, None] * sd[:, None, :])
-        for k in range(len(ch)):
-            for m in range(k + 1, len(ch)):
-                add(Key('correlation', (ch[k], ch[m]), c, None), corr[:, k, m])
-        lag_n = b.part(sums, 'lag_n')[:, members].sum(axis=1)          # (R, L)
-        lag_s = b.part(sums, 'lag_s')[:, members].sum(axis=1)          # (R, L, C)
+        lag_n = b.part(sums, 'lag_n')[:, m].sum(axis=1)          # (R, L)
+        lag_s = b.part(sums, 'lag_s')[:, m].sum(axis=1)          # (R, L, C)
         acf = lag_s / lag_n[..., None] / var[:, None, :]
-        for li, lag in enumerate(LAGS):
-            for k, sensor in enumerate(ch):
-                add(Key('autocorrelation', (sensor,), c, f'lag {lag}'), acf[:, li, k])
-        s4 = b.part(sums, 's4')[:, members].sum(axis=1)
-        total = n[:, members].sum(axis=1)
+        s4 = b.part(sums, 's4')[:, m].sum(axis=1)
+        total = n[:, m].sum(axis=1)
         kurt = s4 / total[:, None] / var ** 2 - 3.0
-        for k, sensor in enumerate(ch):
-            add(Key('kurtosis', (sensor,), c, None), kurt[:, k])
-    slope = _slopes(level, cell_sd)
-    for k, sensor in enumerate(ch):
-        add(Key('spread_vs_level', (sensor,), None, None), slope[:, k])
+        cols += [corr[:, pairs[0], pairs[1]], acf.reshape(r, -1), kurt]
+    cols.append(_slopes(level, cell_sd))
     d2 = b.part(sums, 'step_d2').sum(axis=1)                       # (R, J, C)
+    timed = None
     if (d2[0] > 0).any():
         response = b.part(sums, 'step_dd').sum(axis=1) / d2
-        for k, sensor in enumerate(ch):
-            if d2[0, 0, k] >= 100.0 * STEP_LAGS:     # changes too small to time are left out
-                for j in range(STEP_LAGS):
-                    add(Key('step_response', (sensor,), None, f'sample {j} after a change'),
-                        response[:, j, k])
+        # changes too small to time are left out
+        timed = tuple(bool(v) for v in d2[0, 0] >= 100.0 * STEP_LAGS)
+        cols.append(response[:, :, list(timed)].transpose(0, 2, 1).reshape(r, -1))
     total = n.sum(axis=1)[:, None]
     edge = b.part(sums, 'edge').sum(axis=1) / total[..., None]           # (R, C, 2)
-    for k, sensor in enumerate(ch):
-        for j, end in enumerate(pileup.ENDS):
-            add(Key('pileup', (sensor,), None, end), edge[:, k, j])
+    cols.append(edge.reshape(r, -1))
     if b.extra['integer']:
         for c in conditions:
-            members = [s for s, lab in enumerate(b.strata) if lab[0] == c]
-            share = b.part(sums, 'at_mode')[:, members].sum(axis=1) \
-                / n[:, members].sum(axis=1)[:, None]
-            for k, sensor in enumerate(ch):
-                add(Key('mode_share', (sensor,), c, None), share[:, k])
+            m = members[c]
+            cols.append(b.part(sums, 'at_mode')[:, m].sum(axis=1)
+                        / n[:, m].sum(axis=1)[:, None])
         frac = b.part(sums, 'residue').sum(axis=1) / total[..., None]
-        for k, sensor in enumerate(ch):
-            for j, q in enumerate(MODULI):
-                add(Key('granularity', (sensor,), None, f'step {q}'), frac[:, k, j])
-    return Stats(keys, np.stack(cols, axis=1))
+        cols.append(frac.reshape(r, -1))
+    keys = _stationary_keys(tuple(b.strata), tuple(ch), timed, bool(b.extra['integer']))
+    return Stats(keys, np.concatenate(cols, axis=1))
+
+
+@functools.lru_cache(maxsize=64)
+def _stationary_keys(strata: tuple, ch: tuple, timed: tuple | None, integer: bool) -> list:
+    """The keys of ``_stationary_stats``, in its column order: the same for every
+    simulation of one protocol, so built once (a shared list: never modify it)."""
+    conditions = list(dict.fromkeys(c for c, _ in strata))
+    keys = []
+    for c, h in strata:
+        part = None if h is None else f'heading {h:g} deg'
+        for sensor in ch:
+            keys += [Key('level', (sensor,), c, part), Key('spread', (sensor,), c, part)]
+    for c in conditions:
+        keys += [Key('correlation', (ch[k], ch[m]), c, None)
+                 for k in range(len(ch)) for m in range(k + 1, len(ch))]
+        keys += [Key('autocorrelation', (sensor,), c, f'lag {lag}')
+                 for lag in LAGS for sensor in ch]
+        keys += [Key('kurtosis', (sensor,), c, None) for sensor in ch]
+    keys += [Key('spread_vs_level', (sensor,), None, None) for sensor in ch]
+    if timed is not None:
+        keys += [Key('step_response', (sensor,), None, f'sample {j} after a change')
+                 for sensor, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
+    keys += [Key('pileup', (sensor,), None, end) for sensor in ch for end in pileup.ENDS]
+    if integer:
+        keys += [Key('mode_share', (sensor,), c, None) for c in conditions for sensor in ch]
+        keys += [Key('granularity', (sensor,), None, f'step {q}') for sensor in ch
+                 for q in MODULI]
+    return keys
 
 
 def _slopes(level: np.ndarray, sd: np.ndarray) -> np.ndarray:
