@@ -142,23 +142,28 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
              's4': _block_sum(block, np.square(np.square(y32)), nb)}
     parts['lag_n'], parts['lag_s'] = _lagged(lay['lags'], y32, block, nb)
     integer = bool(np.all(x == np.round(x)))
-    modes = _cell_modes(x, cell, len(labels)) if integer else np.full((len(labels), x.shape[1]),
-                                                                      np.nan)
-    parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float32), nb)
-    residues = _residues(x) if integer else None      # one table serves both uses
-    residue = (residues[order] == _modal_residues(x, residues)[None]).astype(np.float32) \
-        if integer else np.zeros((xo.shape[0], len(channels), len(MODULI)))
-    parts['residue'] = _block_sum(block, residue, nb)
+    if integer:
+        low = int(x.min()) if x.size else 0
+        xi = (x - low).astype(np.int64) if x.size else np.zeros(x.shape, np.int64)
+        span = int(xi.max()) + 1 if x.size else 1
+        modes = _cell_modes(xi, cell, len(labels), span) + low
+        parts['at_mode'] = _block_sum(block, (xo == modes[cell[order]]).astype(np.float32), nb)
+        table = _on_modal_residue(xi, low, span).reshape(span * len(channels), len(MODULI))
+        at = xi[order] * len(channels) + np.arange(len(channels))[None, :]
+        parts['residue'] = _block_sum(block, np.take(table, at, axis=0), nb)
+    else:
+        parts['at_mode'] = _block_sum(block, np.zeros(xo.shape, np.float32), nb)
+        parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
+                                      nb)
     parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
-    parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb,
-                                                      run_means)
+    parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
     sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
                   {'integer': integer})
 
 
-def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of: np.ndarray,
-                 blocks: int, run_means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _transitions(rec: Recording, lay: dict, x: np.ndarray, blocks: int,
+                 run_means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Step responses where a run follows another in the same episode without a gap.
 
     For the j-th sample after the change, d = x - (new run's mean) against the change
@@ -168,19 +173,33 @@ def _transitions(rec: Recording, runs: list[np.ndarray], x: np.ndarray, block_of
     """
     dd = np.zeros((blocks, STEP_LAGS, x.shape[1]))
     d2 = np.zeros((blocks, STEP_LAGS, x.shape[1]))
+    if 'changes' not in lay:
+        lay['changes'] = _changes(rec, lay['runs'], lay['block_of'])
+    at, samples, old, new = lay['changes']
+    if at.size:      # each change has a block of its own
+        change = run_means[old] - run_means[new]
+        dd[at] += (x[samples] - run_means[new][:, None, :]) * change[:, None, :]
+        d2[at] += (change ** 2)[:, None, :]
+    return dd, d2
+
+
+def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tuple:
+    """(block, first ``STEP_LAGS`` samples, old run, new run) of every change of heading
+    that ``_transitions`` times: the same for every replay of a protocol."""
     by_start = sorted(range(len(runs)),
                       key=lambda i: (int(rec.episode[runs[i][0]]), int(rec.step[runs[i][0]])))
-    starts = [runs[i] for i in by_start]
-    means = run_means[by_start]
-    for i, (old, new) in enumerate(zip(starts[:-1], starts[1:])):
+    out = []
+    for i, j in zip(by_start[:-1], by_start[1:]):
+        old, new = runs[i], runs[j]
         b = block_of[new[0]]
         if rec.episode[old[0]] != rec.episode[new[0]] or b < 0 or \
                 rec.step[new[0]] != rec.step[old[-1]] + 1 or new.size <= STEP_LAGS:
             continue
-        change = means[i] - means[i + 1]
-        dd[b] += (x[new[:STEP_LAGS]] - means[i + 1]) * change
-        d2[b] += change ** 2
-    return dd, d2
+        out.append((b, new[:STEP_LAGS], i, j))
+    if not out:
+        return (np.zeros(0, np.int64),) * 4
+    at, samples, old, new = zip(*out)
+    return np.array(at), np.array(samples), np.array(old), np.array(new)
 
 
 def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray:
@@ -218,34 +237,28 @@ def _lagged(pairs: list, y: np.ndarray, block: np.ndarray,
     return counts, sums
 
 
-def _cell_modes(x: np.ndarray, cell: np.ndarray, cells: int) -> np.ndarray:
-    """(cells, C) the most common (integer) reading of each channel in each cell."""
-    low = np.nanmin(x)
-    span = int(np.nanmax(x) - low) + 1
-    channels = x.shape[1]
-    code = ((cell[:, None] * channels + np.arange(channels)[None, :]) * span
-            + (x - low).astype(np.int64)).ravel()
+def _cell_modes(xi: np.ndarray, cell: np.ndarray, cells: int, span: int) -> np.ndarray:
+    """(cells, C) the most common reading of each channel in each cell (``xi``: integer
+    readings less their least, all below ``span``)."""
+    channels = xi.shape[1]
+    code = ((cell[:, None] * channels + np.arange(channels)[None, :]) * span + xi).ravel()
     counts = np.bincount(code, minlength=cells * channels * span)
-    return counts.reshape(cells, channels, span).argmax(axis=2) + low
+    return counts.reshape(cells, channels, span).argmax(axis=2)
 
 
-def _residues(x: np.ndarray) -> np.ndarray:
-    """(N, C, len(MODULI)) int16 residues of integer readings modulo each step (a table
-    lookup: readings are small integers)."""
-    low = int(np.nanmin(x)) if x.size else 0
-    span = int(np.nanmax(x)) - low + 1 if x.size else 1
-    table = np.mod(np.arange(low, low + span)[:, None], np.array(MODULI)[None, :])
-    return table.astype(np.int16)[x.astype(np.int64) - low]
-
-
-def _modal_residues(x: np.ndarray, residues: np.ndarray | None = None) -> np.ndarray:
-    """(C, len(MODULI)) the most common residue of each channel modulo each step."""
-    r = _residues(x) if residues is None else residues
-    out = np.zeros((x.shape[1], len(MODULI)), np.int64)
-    columns = np.arange(x.shape[1])
+def _on_modal_residue(xi: np.ndarray, low: int, span: int) -> np.ndarray:
+    """(span, C, len(MODULI)) float32: 1 where reading ``low`` + v of a channel lies on
+    that channel's most common residue modulo each step.  Residues are counted from
+    each channel's histogram of readings, not reading by reading."""
+    channels = xi.shape[1]
+    hist = np.bincount((xi + span * np.arange(channels)[None, :]).ravel(),
+                       minlength=channels * span).reshape(channels, span)
+    residues = np.mod(np.arange(low, low + span)[:, None], np.array(MODULI)[None, :])
+    out = np.zeros((span, channels, len(MODULI)), np.float32)
     for j, q in enumerate(MODULI):
-        code = (r[:, :, j].astype(np.int64) + q * columns).ravel()
-        out[:, j] = np.bincount(code, minlength=q * x.shape[1]).reshape(-1, q).argmax(axis=1)
+        onehot = (residues[:, j, None] == np.arange(q)[None, :]).astype(np.int64)
+        modal = (hist @ onehot).argmax(axis=1)                       # (C,)
+        out[:, :, j] = residues[:, j, None] == modal[None, :]
     return out
 
 
