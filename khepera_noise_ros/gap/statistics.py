@@ -118,7 +118,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
     channels = tuple(channels)
     lay = _layout(rec, length)
-    labels, cell, runs = lay['labels'], lay['cell'], lay['runs']
+    labels, cell = lay['labels'], lay['cell']
     order, block, nb = lay['order'], lay['block'], lay['nb']
     x = rec.readings[:, list(channels)].astype(np.float64)
     # residuals about each run's own mean: the same small bias for real and simulated

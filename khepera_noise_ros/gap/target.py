@@ -11,6 +11,7 @@ deterministic function of the effect's parameters.
 from __future__ import annotations
 
 import copy
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from ..recording import Recording
 from . import replay, statistics
 from .simconfig import SimConfig
 from .statistics import Stats
-from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, standard_error
+from .where import FLOOR, FLOORS, MARGIN, Z_CAP, Comparison, compare, discrepancy
 
 SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
@@ -61,9 +62,8 @@ class Target:
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
-        return [replay.replay(self.recordings[i], self.config, effects,
-                              seed=self.seed + 7919 * i, replicates=copies, base=self.base)
-                for i in self._chosen(kinds)]
+        return [_replay(self.recordings[i], self.config, effects, self.seed + 7919 * i, copies,
+                        self.base) for i in self._chosen(kinds)]
 
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]
@@ -96,37 +96,68 @@ class Target:
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
-        span = int(self.recordings[i].episode.max()) + 1
-        lay = statistics._layout(sim, self.block_lengths[i])
-        labels, cell = lay['labels'], lay['cell']
-        copy = sim.episode // span
-        used = list(self.recordings[i].channels_used)
-        code = cell * copies + copy
-        size = len(labels) * copies
-        count = np.bincount(code, minlength=size).reshape(len(labels), copies)
-        x = sim.readings[:, used]
-        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(len(used))],
-                         axis=1).reshape(len(labels), copies, len(used))
+        plan = self._inflation_plan(i, sim, copies)
+        code, size, count, cells, cond, real_var, names = plan
+        x = sim.readings[:, list(self.recordings[i].channels_used)]
+        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])],
+                         axis=1).reshape(len(count), copies, x.shape[1])
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
-        spread = np.var(means, axis=1, ddof=1)                    # (cells, channels)
-        real = self._real[i]
-        real_index = real.index()
-        by_condition: dict = {}
-        for c, (cond, h) in enumerate(labels):
-            part = None if h is None else f'heading {h:g} deg'
-            for k, sensor in enumerate(used):
-                key = statistics.Key('level', (sensor,), cond, part)
-                if key in real_index and np.isfinite(spread[c, k]):
-                    acc = by_condition.setdefault(cond, [0.0, 0.0])
-                    acc[0] += spread[c, k]
-                    acc[1] += real.variance[real_index[key]]
-        ratio = {c: float(np.clip(a / b, 1.0, 1e4)) if b > 0 else 1.0
-                 for c, (a, b) in by_condition.items()}
-        for j, key in enumerate(pooled.keys):
-            if key.family == 'level':
-                factor[j] = ratio.get(key.condition, 1.0)
+        spread = np.var(means, axis=1, ddof=1)[cells]             # per (cell, channel) entry
+        ok = np.isfinite(spread)
+        # sums over the entries in order, as a loop adding them one by one would
+        a = np.bincount(cond[ok], spread[ok], minlength=len(names))
+        b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
+        at, of = self._level_positions(i, pooled.keys, names)
+        factor[at] = np.r_[ratio, 1.0][of]
         return factor
+
+    def _inflation_plan(self, i: int, sim: Recording, copies: int) -> tuple:
+        """What ``_level_inflation`` needs of the protocol alone (the same for every replay
+        with ``copies`` copies): sample codes of (cell, copy), counts, and the (cell,
+        channel) entries that have a real level, with their condition and real variance."""
+        cache = self.__dict__.setdefault('_plans', {})
+        key = (i, copies)
+        if key not in cache:
+            span = int(self.recordings[i].episode.max()) + 1
+            lay = statistics._layout(sim, self.block_lengths[i])
+            labels, cell = lay['labels'], lay['cell']
+            code = cell * copies + sim.episode // span
+            size = len(labels) * copies
+            count = np.bincount(code, minlength=size).reshape(len(labels), copies)
+            used = list(self.recordings[i].channels_used)
+            real = self._real[i]
+            real_index = real.index()
+            names: dict = {}
+            entries = []
+            for c, (condition, h) in enumerate(labels):
+                part = None if h is None else f'heading {h:g} deg'
+                for k, sensor in enumerate(used):
+                    j = real_index.get(statistics.Key('level', (sensor,), condition, part))
+                    if j is not None:
+                        entries.append(((c, k), names.setdefault(condition, len(names)),
+                                        real.variance[j]))
+            cells = tuple(np.array([e[0][d] for e in entries], np.int64) for d in (0, 1))
+            cache[key] = (code, size, count, cells, np.array([e[1] for e in entries], np.int64),
+                          np.array([e[2] for e in entries], np.float64), names)
+        return cache[key]
+
+    def _level_positions(self, i: int, keys: list,
+                         names: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(positions of the level statistics in ``keys``, their condition's number in
+        ``names``, len(names) if none), cached for a key list shared by replays."""
+        cache = self.__dict__.setdefault('_positions', {})
+        hit = cache.get((i, id(keys)))
+        if hit is None or hit[0] is not keys:
+            if len(cache) > 32:
+                cache.clear()
+            at = [j for j, k in enumerate(keys) if k.family == 'level']
+            of = [names.get(keys[j].condition, len(names)) for j in at]
+            hit = cache[(i, id(keys))] = (keys, np.array(at, np.int64),
+                                          np.array(of, np.int64))
+        return hit[1], hit[2]
 
     def with_given(self, effects) -> 'Target':
         """This target with ``effects`` always in the simulator (real statistics shared):
@@ -147,19 +178,41 @@ class Target:
         """The discrepancy with ``effects`` added, from simulated estimates only, over the
         recordings of ``kinds`` and the statistics of ``families`` (None: all but those
         in ``LIMITS_ONLY`` unless ``limits``)."""
-        real = _join([self._real[i] for i in self._chosen(kinds)])
+        real = self._real_of(kinds)
         copies = self._objective_copies()
         sim, factor = self._simulated(effects, 0, kinds, copies)
-        where = sim.index()
-        pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where
-                 and (k.family in families if families is not None
-                      else limits or k.family not in LIMITS_ONLY)]
-        ri, si = (np.array(p, np.int64) for p in zip(*pairs))
+        ri, si, floor = self._pairs(real, sim, families, limits)
         d = real.estimate[ri] - sim.estimate[si]
-        se = standard_error(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies),
-                            [real.keys[i] for i in ri])
+        se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies) + floor)
         ok = np.isfinite(d) & np.isfinite(se)
         return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
+
+    def _real_of(self, kinds) -> Stats:
+        """The real statistics of the recordings of ``kinds``, joined once."""
+        cache = self.__dict__.setdefault('_joined', {})
+        if kinds not in cache:
+            cache[kinds] = _join([self._real[i] for i in self._chosen(kinds)])
+        return cache[kinds]
+
+    def _pairs(self, real: Stats, sim: Stats, families, limits: bool) -> tuple:
+        """(real rows, simulated rows, squared floor of the standard error) of the
+        statistics an objective compares; cached while the simulated key list is the
+        one every replay of the protocol shares."""
+        cache = self.__dict__.setdefault('_aligned', {})
+        key = (id(real.keys), id(sim.keys), None if families is None else frozenset(families),
+               limits)
+        hit = cache.get(key)
+        if hit is None or hit[0] is not real.keys or hit[1] is not sim.keys:
+            where = sim.index()
+            pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where
+                     and (k.family in families if families is not None
+                          else limits or k.family not in LIMITS_ONLY)]
+            ri, si = (np.array(p, np.int64) for p in zip(*pairs))
+            floor = np.array([FLOORS.get(real.keys[i].family, FLOOR) for i in ri]) ** 2
+            if len(cache) > 32:
+                cache.clear()
+            hit = cache[key] = (real.keys, sim.keys, ri, si, floor)
+        return hit[2:]
 
     def _objective_copies(self) -> int:
         """Copies simulated while fitting: one for a long recording (its simulated
@@ -177,6 +230,32 @@ class Target:
             z = (self.real.values[1:, rows] - c.sim[None]) / c.se[None]
         z = np.nan_to_num(z, nan=0.0, posinf=1e3, neginf=-1e3)
         return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+
+
+_REPLAYS: OrderedDict = OrderedDict()
+REPLAY_CACHE = 16
+
+
+def _replay(rec: Recording, config: SimConfig, effects: tuple, seed: int, copies: int,
+            base: str) -> Recording:
+    """``replay.replay``, remembered: a replay is a deterministic function of the recording,
+    the configuration, the effects, the seed and the copies, and the fitters ask for the
+    same one again (the simulator with the chosen effects and nothing more).  A replay
+    given out is read-only, since it is shared."""
+    key = (id(rec), config, effects, seed, copies, base)
+    try:
+        hit = _REPLAYS.get(key)
+    except TypeError:           # an unhashable parameter: replay it every time
+        return replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+    if hit is not None and hit[0] is rec:
+        _REPLAYS.move_to_end(key)
+        return hit[1]
+    sim = replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+    sim.readings.flags.writeable = False
+    _REPLAYS[key] = (rec, sim)
+    if len(_REPLAYS) > REPLAY_CACHE:
+        _REPLAYS.popitem(last=False)
+    return sim
 
 
 def _join(parts: list[Stats]) -> Stats:
