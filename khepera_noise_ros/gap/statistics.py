@@ -295,19 +295,35 @@ def stratum_sums(blocks: Blocks, w: np.ndarray) -> np.ndarray:
         if used.any():
             out[used] += np.add.reduceat(blocks.sums, lo[used], axis=0)
         return out[None]
-    # Blocks are sorted by stratum, so row (replicate, stratum) of the selection matrix
-    # holds that stratum's blocks in order; built directly in CSR form.  Blocks a
-    # replicate did not draw (weight 0, a third of them) are left out: adding 0 x a
-    # finite sum changes nothing, so only when every sum is finite.
-    data = w.ravel()
-    indices = np.tile(np.arange(b), r)
-    rows = (np.arange(r)[:, None] * strata + blocks.stratum[None, :]).ravel()
-    if np.isfinite(blocks.sums).all():
+    # Blocks are sorted by stratum.  Rows of the selection matrix are (stratum, replicate),
+    # each holding that stratum's blocks in order, so a stratum's sums stay in cache while
+    # its replicates are added up (the same products, added in the same order, as with
+    # rows by replicate); built directly in CSR form.  Blocks a replicate did not draw
+    # (weight 0, a third of them) are left out: adding 0 x a finite sum changes nothing,
+    # so only when every sum is finite.
+    flat, col, rows = _stratum_major(tuple(blocks.edges.tolist()), r)
+    data = np.take(w.ravel(), flat)
+    if np.isfinite(blocks.sums.sum()):      # a finite total: every sum is finite
         drawn = data != 0.0
-        data, indices, rows = data[drawn], indices[drawn], rows[drawn]
+        data, col, rows = data[drawn], col[drawn], rows[drawn]
     indptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=r * strata))]
-    pick = sparse.csr_matrix((data, indices, indptr), shape=(r * strata, b))
-    return np.asarray(pick @ blocks.sums).reshape(r, strata, -1)
+    pick = sparse.csr_matrix((data, col, indptr), shape=(r * strata, b))
+    out = np.asarray(pick @ blocks.sums).reshape(strata, r, -1)
+    return np.ascontiguousarray(out.transpose(1, 0, 2))
+
+
+@functools.lru_cache(maxsize=8)
+def _stratum_major(edges: tuple, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(position in the (r, B) weights, block, row) of every weight, stratum by stratum,
+    replicate by replicate (the row is stratum x r + replicate)."""
+    b = edges[-1]
+    flat, col, rows = [], [], []
+    for s, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        rep = np.repeat(np.arange(r), hi - lo)
+        col.append(np.tile(np.arange(lo, hi), r))
+        flat.append(rep * b + col[-1])
+        rows.append(s * r + rep)
+    return np.concatenate(flat), np.concatenate(col), np.concatenate(rows)
 
 
 def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stats:
