@@ -221,7 +221,7 @@ def _backfit(a: Target, chosen: list) -> list:
         others = out[:i] + out[i + 1:]
         given = a.with_given(others)
         cand = fit.fit_one(out[i].name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
-        if cand.effect is None:
+        if cand.effect is None or cand.effect == out[i]:      # nothing to choose between
             continue
         if given.objective([cand.effect]) < given.objective([out[i]]):
             out[i] = cand.effect

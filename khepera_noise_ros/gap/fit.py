@@ -256,10 +256,14 @@ def intensity(target: Target, c: Comparison) -> Candidate:
 
 
 def _level(c: Comparison, key) -> float | None:
-    for k, r, s, *_ in _rows(c, 'level'):
-        if k.sensors == key.sensors and k.condition == key.condition and k.part == key.part:
-            return s
-    return None
+    """The simulated level of ``key``'s cell (the first level row of that cell)."""
+    levels = c.__dict__.get('_levels')
+    if levels is None:          # one look-up table per comparison, not a scan per cell
+        levels = {}
+        for k, r, s, *_ in _rows(c, 'level'):
+            levels.setdefault((k.sensors, k.condition, k.part), s)
+        c.__dict__['_levels'] = levels
+    return levels.get((key.sensors, key.condition, key.part))
 
 
 # --- temporal_drift --------------------------------------------------------------------

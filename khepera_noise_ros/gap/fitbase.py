@@ -20,8 +20,15 @@ class Candidate:
 
 
 def rows(c: Comparison, family: str):
-    return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
-            if k.family == family]
+    """(key, real, sim, se, z) of the statistics of ``family``; the comparison is split
+    by family once (fitters ask for many families, many times)."""
+    by = c.__dict__.get('_by_family')
+    if by is None:
+        by = {}
+        for row in zip(c.keys, c.real, c.sim, c.se, c.z):
+            by.setdefault(row[0].family, []).append(row)
+        c.__dict__['_by_family'] = by
+    return list(by.get(family, ()))
 
 
 def golden(f, lo: float, hi: float, evaluations: int) -> float:
