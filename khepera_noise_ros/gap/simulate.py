@@ -10,6 +10,7 @@ light model does not describe.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -145,12 +146,22 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
         level = e.over_time(level, rng)
     level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
     groups = max(1, len(noise.groups))
-    draws = np.random.default_rng([int(seed), 0x5A7]).integers(
-        0, int(UNIT) + 1, size=(samples, channels + groups, robots), dtype=np.uint16)
+    d = _draws(int(seed), samples, channels + groups, robots)
     flat = np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(channels, -1)
-    d = draws.transpose(1, 0, 2).reshape(channels + groups, -1)
     out = noise.apply(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in _staged(effects, 'reading'):
         out = e.over_time(out, rng)
     return np.clip(np.rint(out), 0.0, DARK)
+
+
+@functools.lru_cache(maxsize=8)
+def _draws(seed: int, samples: int, rows: int, robots: int) -> np.ndarray:
+    """The model's noise draws of ``stationary``, (rows, samples x robots), read-only: they
+    depend on the seed and the shape alone (not on the effects), and every replay of a
+    protocol with one seed uses the same."""
+    draws = np.random.default_rng([seed, 0x5A7]).integers(
+        0, int(UNIT) + 1, size=(samples, rows, robots), dtype=np.uint16)
+    out = np.ascontiguousarray(draws.transpose(1, 0, 2)).reshape(rows, -1)
+    out.flags.writeable = False
+    return out
