@@ -79,4 +79,4 @@ def pack(parts: dict[str, np.ndarray], blocks: int) -> tuple[np.ndarray, dict]:
         layout[name] = (slice(at, at + size), shape)
         columns.append(value.reshape(blocks, size))
         at += size
-    return np.concatenate(columns, axis=1).astype(np.float64), layout
+    return np.concatenate(columns, axis=1).astype(np.float64, copy=False), layout

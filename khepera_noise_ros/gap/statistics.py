@@ -119,7 +119,10 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     channels = tuple(channels)
     lay = _layout(rec, length)
     labels, cell = lay['labels'], lay['cell']
-    order, block, nb = lay['order'], lay['block'], lay['nb']
+    order, nb = lay['order'], lay['nb']
+    if 'segments' not in lay:
+        lay['segments'] = _segments(lay['block'], nb)
+    block = lay['segments']
     x = rec.readings[:, list(channels)].astype(np.float64)
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
@@ -135,12 +138,12 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     s2 = np.zeros((nb, len(channels), len(channels)))
     s2[:, upper[0], upper[1]] = _block_sum(block, y32[:, upper[0]] * y32[:, upper[1]], nb)
     s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
-    parts = {'n': np.bincount(block, minlength=nb)[:, None].astype(np.float64),
+    parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
              's1': _block_sum(block, yo, nb),
              's2': s2,
              's4': _block_sum(block, np.square(np.square(y32)), nb)}
-    parts['lag_n'], parts['lag_s'] = _lagged(lay['lags'], y32, block, nb)
+    parts['lag_n'], parts['lag_s'] = _lagged(lay, y32, nb)
     integer = bool(np.all(x == np.round(x)))
     if integer:
         low = int(x.min()) if x.size else 0
@@ -202,14 +205,28 @@ def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tu
     return np.array(at), np.array(samples), np.array(old), np.array(new)
 
 
-def _block_sum(block: np.ndarray, values: np.ndarray, blocks: int) -> np.ndarray:
+def _block_sum(block, values: np.ndarray, blocks: int) -> np.ndarray:
     """Sums of ``values`` per block (in their own precision), as doubles; ``block`` must be
-    non-decreasing."""
+    non-decreasing (or its ``_segments``)."""
+    starts, targets, dense = _segments(block, blocks) if isinstance(block, np.ndarray) \
+        else block
+    if dense:                   # every block has samples, in order: no scatter needed
+        return np.add.reduceat(values, starts, axis=0).astype(np.float64)
     out = np.zeros((blocks,) + values.shape[1:])
-    if block.size:
-        starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
-        out[block[starts]] = np.add.reduceat(values, starts, axis=0)
+    if starts.size:
+        out[targets] = np.add.reduceat(values, starts, axis=0)
     return out
+
+
+def _segments(block: np.ndarray, blocks: int) -> tuple:
+    """(first position of each block's run in ``block``, its block, whether those are
+    0..blocks-1 in order): how ``_block_sum`` cuts values, the same for every replay."""
+    if not block.size:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), False
+    starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
+    targets = block[starts]
+    return starts, targets, bool(targets.size == blocks and
+                                 np.array_equal(targets, np.arange(blocks)))
 
 
 def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list:
@@ -225,15 +242,19 @@ def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list:
     return out
 
 
-def _lagged(pairs: list, y: np.ndarray, block: np.ndarray,
-            blocks: int) -> tuple[np.ndarray, np.ndarray]:
+def _lagged(lay: dict, y: np.ndarray, blocks: int) -> tuple[np.ndarray, np.ndarray]:
     """Products of residues ``lag`` steps apart in the same run, credited to the block of
     the first sample: (blocks, lags) counts and (blocks, lags, C) sums."""
+    if 'lag_segments' not in lay:       # the same for every replay of the protocol
+        lay['lag_segments'] = [(np.bincount(lay['block'][hit], minlength=blocks),
+                                _segments(lay['block'][hit], blocks))
+                               for hit, _ in lay['lags']]
     counts = np.zeros((blocks, len(LAGS)))
     sums = np.zeros((blocks, len(LAGS), y.shape[1]))
-    for li, (hit, partner) in enumerate(pairs):
-        counts[:, li] = np.bincount(block[hit], minlength=blocks)
-        sums[:, li] = _block_sum(block[hit], y[hit] * y[partner], blocks)
+    for li, ((hit, partner), (count, segments)) in enumerate(zip(lay['lags'],
+                                                                 lay['lag_segments'])):
+        counts[:, li] = count
+        sums[:, li] = _block_sum(segments, y[hit] * y[partner], blocks)
     return counts, sums
 
 
