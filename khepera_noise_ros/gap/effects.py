@@ -144,8 +144,20 @@ class IntensityDependentNoise(_OnSensors):
         out = level.copy()
         width = 1 if self.shared else len(rows)
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))
-        out[:, rows] += z * self.amplitude(level[:, rows])
+        out[:, rows] += z * _held(self.amplitude, level[:, rows])
         return out
+
+
+def _held(f, x: np.ndarray) -> np.ndarray:
+    """``f(x)`` of an elementwise ``f`` over (samples, ...) ``x``, computed only at the
+    samples where ``x`` changes (a stationary light level holds for a whole run; the
+    power law is the costly part of a replay): the same values."""
+    if x.shape[0] < 2:
+        return f(x)
+    new = np.flatnonzero(np.r_[True, (x[1:] != x[:-1]).reshape(x.shape[0] - 1, -1).any(axis=1)])
+    if new.size > x.shape[0] // 4:
+        return f(x)
+    return np.repeat(f(x[new]), np.diff(np.r_[new, x.shape[0]]), axis=0)
 
 
 @dataclass(frozen=True)
@@ -213,8 +225,12 @@ class SensorLatency(_OnSensors):
     def over_time(self, level: np.ndarray, rng) -> np.ndarray:
         rows = _rows(self.sensors, level.shape[1])
         out = level.copy()
-        late = np.maximum(np.arange(level.shape[0]) - self.steps, 0)
-        out[:, rows] = level[late][:, rows]
+        if self.steps <= 0:
+            return out
+        # sample t reads sample max(t - steps, 0): slices, not a gather of every sample
+        cols = slice(None) if rows == list(range(level.shape[1])) else rows
+        out[self.steps:, cols] = level[:max(level.shape[0] - self.steps, 0), cols]
+        out[:self.steps, cols] = level[:1, cols]
         return out
 
 
