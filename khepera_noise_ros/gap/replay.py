@@ -85,7 +85,22 @@ def replay(rec: Recording, config: SimConfig, effects=(), seed: int = 0, replica
     effects = tuple(config.effects) + tuple(effects)
     if kind(rec) == 'closed_loop':
         return _closed_loop(rec, config, effects, seed, replicates)
-    return _stationary(rec, config, effects, seed, replicates, base_mode(rec, base)[0])
+    return _stationary(rec, config, effects, seed, replicates, _mode(rec, base))
+
+
+_MODES: dict = {}
+
+
+def _mode(rec: Recording, requested: str) -> str:
+    """``base_mode(rec, requested)[0]``, found once per recording."""
+    hit = _MODES.get((id(rec), requested))
+    if hit is not None and hit[0] is rec:
+        return hit[1]
+    mode = base_mode(rec, requested)[0]
+    if len(_MODES) > 64:
+        _MODES.clear()
+    _MODES[(id(rec), requested)] = (rec, mode)
+    return mode
 
 
 def runs(rec: Recording) -> list[np.ndarray]:
@@ -101,13 +116,33 @@ def runs(rec: Recording) -> list[np.ndarray]:
 def _stationary(rec, config, effects, seed, replicates, mode) -> Recording:
     """Each episode is simulated as one continuous run through its headings and conditions,
     so effects with memory (drift, latency) carry over from one heading to the next."""
-    episodes, column = np.unique(rec.episode, return_inverse=True)
     light, noise, scale = _light(rec, config, mode)
-    light = np.tile(light, (1, 1, replicates))     # copies side by side
-    sim = stationary(light, noise, effects, seed=seed) * scale
-    readings = np.concatenate([sim[rec.step, :, column + k * episodes.size]
-                               for k in range(replicates)])
-    return _indexed(rec, replicates, readings)
+    tiled, step, column = _copies(rec, light, replicates)
+    sim = stationary(tiled, noise, effects, seed=seed)
+    if scale != 1.0:
+        sim = sim * scale
+    return _indexed(rec, replicates, sim[step, :, column])
+
+
+_COPIES: dict = {}
+
+
+def _copies(rec: Recording, light: np.ndarray, replicates: int) -> tuple:
+    """(the light of ``replicates`` copies side by side, read-only; per replayed sample its
+    step and column in it), made once per recording, light and number of copies."""
+    key = (id(rec), id(light), replicates)
+    hit = _COPIES.get(key)
+    if hit is not None and hit[0] is rec and hit[1] is light:
+        return hit[2]
+    episodes, column = np.unique(rec.episode, return_inverse=True)
+    tiled = np.tile(light, (1, 1, replicates))
+    tiled.flags.writeable = False
+    out = (tiled, np.tile(rec.step, replicates),
+           np.concatenate([column + k * episodes.size for k in range(replicates)]))
+    if len(_COPIES) > 16:
+        _COPIES.clear()
+    _COPIES[key] = (rec, light, out)
+    return out
 
 
 _INDEX: dict = {}

@@ -141,13 +141,16 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
     """
     samples, channels, robots = base.shape
     rng = np.random.default_rng(_entropy(seed))
-    level = np.asarray(base, np.float64)
-    for e in _staged(effects, 'light'):
-        level = e.over_time(level, rng)
-    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+    light = _staged(effects, 'light')
+    if light or base.flags.writeable:
+        level = np.asarray(base, np.float64)
+        for e in light:
+            level = e.over_time(level, rng)
+        flat = _levels(level)
+    else:                       # a read-only base (a replay's light): its levels once
+        flat = _held_levels(base)
     groups = max(1, len(noise.groups))
     d = _draws(int(seed), samples, channels + groups, robots)
-    flat = np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(channels, -1)
     out = noise.apply(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in _staged(effects, 'reading'):
@@ -165,3 +168,25 @@ def _draws(seed: int, samples: int, rows: int, robots: int) -> np.ndarray:
     out = np.ascontiguousarray(draws.transpose(1, 0, 2)).reshape(rows, -1)
     out.flags.writeable = False
     return out
+
+
+def _levels(level: np.ndarray) -> np.ndarray:
+    """(channels, samples x units) float32 integer light levels the model's noise acts on."""
+    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+    return np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(level.shape[1], -1)
+
+
+_HELD: dict = {}
+
+
+def _held_levels(base: np.ndarray) -> np.ndarray:
+    """``_levels`` of a read-only ``base``, made once (read-only too)."""
+    hit = _HELD.get(id(base))
+    if hit is not None and hit[0] is base:
+        return hit[1]
+    flat = _levels(np.asarray(base, np.float64))
+    flat.flags.writeable = False
+    if len(_HELD) > 8:
+        _HELD.clear()
+    _HELD[id(base)] = (base, flat)
+    return flat
