@@ -82,11 +82,13 @@ def _mode_plain(x: np.ndarray, cell: np.ndarray) -> np.ndarray:
     return out
 
 
-def test_mode_and_residue_counts_equal_reading_by_reading_counts():
-    rec = recorded(stationary_protocol(samples=20), [fx.SaturationQuantization(
+@pytest.mark.parametrize('samples,length', [(20, 5), (40, 150)])   # packed, plain counts
+def test_mode_and_residue_counts_equal_reading_by_reading_counts(samples, length):
+    rec = recorded(stationary_protocol(samples=samples), [fx.SaturationQuantization(
         (0, 1, 2, 3), step=4.0, origin=1.0)])
-    b = statistics.stationary_blocks(rec, rec.channels_used, 5)
-    lay = statistics._layout(rec, 5)
+    b = statistics.stationary_blocks(rec, rec.channels_used, length)
+    lay = statistics._layout(rec, length)
+    assert (lay['largest'] >= 1 << statistics.DIGIT) == (length > 100)
     per_block = np.zeros((lay['nb'],) + rec.readings.shape[1:] + (len(statistics.MODULI),))
     np.add.at(per_block, lay['block'], _residue_plain(rec.readings)[lay['order']])
     modes = np.zeros((lay['nb'], rec.readings.shape[1]))
@@ -94,6 +96,9 @@ def test_mode_and_residue_counts_equal_reading_by_reading_counts():
     order = np.argsort(lay['stratum'], kind='stable')      # Blocks sorts by stratum
     assert np.array_equal(b.part(b.sums, 'residue'), per_block[order])
     assert np.array_equal(b.part(b.sums, 'at_mode'), modes[order])
+    edges = np.zeros((lay['nb'],) + rec.readings.shape[1:] + (2,))
+    np.add.at(edges, lay['block'], statistics.pileup.edge_hits(rec.readings)[lay['order']])
+    assert np.array_equal(b.part(b.sums, 'edge'), edges[order])
     on_lattice = b.part(b.sums, 'residue')[:, :4, statistics.MODULI.index(4)].sum()
     assert on_lattice > 0.9 * 4 * len(rec)          # the quantised sensors sit on it
 
