@@ -160,3 +160,22 @@ def test_backfit_does_not_weigh_a_refit_that_is_the_effect_it_had(monkeypatch):
     monkeypatch.setattr(fit, 'fit_one', lambda name, given, c: Candidate(name, changed, ''))
     compound._backfit(a, chosen)
     assert len(calls) == 2
+
+
+def test_block_sums_of_rows_in_order_equal_the_general_path():
+    """A recording in step order takes the shortcut (no reordering of its rows); the
+    general path, which reorders, gives the same sums."""
+    rec = recorded(stationary_protocol(samples=20), [fx.SensorLatency((2,), 1)])
+    shortcut = statistics.stationary_blocks(rec, rec.channels_used, 5)
+    lay = statistics._layout(rec, 5)
+    assert lay['sorted']
+    lay['sorted'] = False
+    try:
+        general = statistics.stationary_blocks(rec, rec.channels_used, 5)
+    finally:
+        lay['sorted'] = True
+    assert np.array_equal(shortcut.sums, general.sums)
+    shuffled = rec.select(np.random.default_rng(0).permutation(len(rec)))
+    other = statistics.stationary_blocks(shuffled, rec.channels_used, 5)
+    assert not statistics._layout(shuffled, 5)['sorted']
+    assert np.array_equal(np.sort(other.sums, axis=0), np.sort(shortcut.sums, axis=0))

@@ -130,13 +130,19 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
     y = np.empty_like(x)
     y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
-    yo, xo = y[order], x[order]
+    if 'sorted' not in lay:     # samples already in block order (a replay's are)
+        lay['sorted'] = bool(order.size == len(rec) and
+                             np.array_equal(order, np.arange(order.size)))
+
+    def inorder(a: np.ndarray) -> np.ndarray:
+        return a if lay['sorted'] else a[order]
+    yo, xo = inorder(y), inorder(x)
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
     y32 = yo.astype(np.float32)
     upper = np.triu_indices(len(channels))
     s2 = np.zeros((nb, len(channels), len(channels)))
-    s2[:, upper[0], upper[1]] = _block_sum(block, y32[:, upper[0]] * y32[:, upper[1]], nb)
+    s2[:, upper[0], upper[1]] = _block_sum(block, _upper_products(y32), nb)
     s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
     parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
@@ -150,10 +156,10 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         xi = (x - low).astype(np.int64) if x.size else np.zeros(x.shape, np.int64)
         span = int(xi.max()) + 1 if x.size else 1
         modes = _cell_modes(xi, cell, len(labels), span) + low
-        on_mode = xo == modes[cell[order]]
+        on_mode = xo == modes[inorder(cell)]
         table = _on_modal_residue(xi, low, span).reshape(span * len(channels), len(MODULI))
-        at = xi[order] * len(channels) + np.arange(len(channels))[None, :]
-        edge = pileup.edge_hits(x)[order]
+        at = inorder(xi) * len(channels) + np.arange(len(channels))[None, :]
+        edge = inorder(pileup.edge_hits(x))
         if 'largest' not in lay:
             lay['largest'] = int(np.bincount(lay['block']).max()) if nb else 0
         if lay['largest'] < 1 << DIGIT:
@@ -166,11 +172,22 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         parts['at_mode'] = _block_sum(block, np.zeros(xo.shape, np.float32), nb)
         parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
                                       nb)
-        parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
+        parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
     sums, layout = pack(parts, nb)
     return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
                   {'integer': integer})
+
+
+def _upper_products(y: np.ndarray) -> np.ndarray:
+    """(N, C (C + 1) / 2) products y_k y_m, k <= m, in ``np.triu_indices`` order."""
+    c = y.shape[1]
+    out = np.empty((y.shape[0], c * (c + 1) // 2), y.dtype)
+    at = 0
+    for k in range(c):
+        np.multiply(y[:, k:k + 1], y[:, k:], out=out[:, at:at + c - k])
+        at += c - k
+    return out
 
 
 DIGIT = 7     # bits per count when a block's 0/1 indicators are counted packed together
