@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from khepera_noise_ros.gap import compound, fit, statistics, target
+from khepera_noise_ros.gap import blocklength, compound, fit, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import Blocks, pack
 from khepera_noise_ros.gap.fitbase import Candidate
@@ -179,3 +179,18 @@ def test_block_sums_of_rows_in_order_equal_the_general_path():
     other = statistics.stationary_blocks(shuffled, rec.channels_used, 5)
     assert not statistics._layout(shuffled, 5)['sorted']
     assert np.array_equal(np.sort(other.sums, axis=0), np.sort(shortcut.sums, axis=0))
+
+
+def test_autocovariance_through_the_spectrum_equals_lag_by_lag_sums():
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(700, 4)).cumsum(axis=0) * 0.1 + rng.normal(size=(700, 4))
+    segments = [slice(0, 300), slice(300, 301), slice(301, 700)]
+    plain = np.zeros((151, 4))
+    for s in segments:
+        seg = x[s]
+        for lag in range(min(150, len(seg) - 1) + 1):
+            plain[lag] += (seg[lag:] * seg[:len(seg) - lag]).sum(axis=0)
+    plain /= 700
+    assert np.allclose(blocklength.autocovariance(x, segments, 150), plain, rtol=0,
+                       atol=1e-12 * np.abs(plain).max())
+    assert blocklength.block_length(x, segments[::2], 1, 100) > 5     # the walk needs long
