@@ -155,7 +155,8 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in _staged(effects, 'reading'):
         out = e.over_time(out, rng)
-    return np.clip(np.rint(out), 0.0, DARK)
+    out = np.rint(out)                    # a new array: clipped in place
+    return np.clip(out, 0.0, DARK, out=out)
 
 
 @functools.lru_cache(maxsize=8)
@@ -172,7 +173,8 @@ def _draws(seed: int, samples: int, rows: int, robots: int) -> np.ndarray:
 
 def _levels(level: np.ndarray) -> np.ndarray:
     """(channels, samples x units) float32 integer light levels the model's noise acts on."""
-    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+    level = np.rint(level)
+    level = np.clip(level, 0.0, DARK, out=level).astype(np.float32)
     return np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(level.shape[1], -1)
 
 
