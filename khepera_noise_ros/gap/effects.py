@@ -144,7 +144,8 @@ class IntensityDependentNoise(_OnSensors):
         out = level.copy()
         width = 1 if self.shared else len(rows)
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))
-        out[:, rows] += z * _held(self.amplitude, level[:, rows])
+        cols = slice(None) if rows == list(range(level.shape[1])) else rows    # a view
+        out[:, cols] += z * _held(self.amplitude, level[:, cols])
         return out
 
 

@@ -103,8 +103,27 @@ def _mode(rec: Recording, requested: str) -> str:
     return mode
 
 
+_RUNS: dict = {}
+
+
 def runs(rec: Recording) -> list[np.ndarray]:
-    """Sample indices of each (episode, condition, heading) run, in step order."""
+    """Sample indices of each (episode, condition, heading) run, in step order (read-only;
+    found once per set of index columns: every replay of a recording shares them)."""
+    cols = (rec.episode, rec.step, rec.heading_deg, rec.condition)
+    key = tuple(id(c) for c in cols)
+    hit = _RUNS.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], cols)):
+        return list(hit[1])
+    out = _runs(rec)
+    for r in out:
+        r.flags.writeable = False
+    if len(_RUNS) > 32:
+        _RUNS.clear()
+    _RUNS[key] = (cols, out)
+    return list(out)
+
+
+def _runs(rec: Recording) -> list[np.ndarray]:
     heading = np.nan_to_num(np.round(rec.heading_deg, 1), nan=1e9)
     _, cond = np.unique(rec.condition, return_inverse=True)
     order = np.lexsort((rec.step, heading, cond, rec.episode))
