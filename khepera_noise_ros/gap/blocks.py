@@ -61,8 +61,9 @@ class Blocks:
     extra: dict = field(default_factory=dict)   # facts the statistics need
 
     def __post_init__(self):
-        order = np.argsort(self.stratum, kind='stable')     # each stratum's blocks together
-        self.stratum, self.sums = self.stratum[order], self.sums[order]
+        if np.any(self.stratum[1:] < self.stratum[:-1]):     # each stratum's blocks together
+            order = np.argsort(self.stratum, kind='stable')
+            self.stratum, self.sums = self.stratum[order], self.sums[order]
         self.edges = np.searchsorted(self.stratum, np.arange(len(self.strata) + 1))
 
     def part(self, flat: np.ndarray, name: str) -> np.ndarray:
@@ -71,12 +72,21 @@ class Blocks:
         return flat[..., where].reshape(flat.shape[:-1] + shape)
 
 
-def pack(parts: dict[str, np.ndarray], blocks: int) -> tuple[np.ndarray, dict]:
-    layout, columns, at = {}, [], 0
+def pack(parts: dict[str, np.ndarray], blocks: int,
+         order: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """(blocks, D) doubles of the named parts side by side, and where each lies; with
+    ``order``, the rows taken in that order (one copy, not two)."""
+    layout, at = {}, 0
     for name, value in parts.items():
         shape = value.shape[1:]
         size = int(np.prod(shape, dtype=int))
         layout[name] = (slice(at, at + size), shape)
-        columns.append(value.reshape(blocks, size))
         at += size
-    return np.concatenate(columns, axis=1).astype(np.float64, copy=False), layout
+    out = np.empty((blocks, at))
+    for name, value in parts.items():
+        flat = value.reshape(blocks, layout[name][0].stop - layout[name][0].start)
+        if order is None:
+            out[:, layout[name][0]] = flat
+        else:
+            np.take(flat, order, axis=0, out=out[:, layout[name][0]], mode='clip')
+    return out, layout

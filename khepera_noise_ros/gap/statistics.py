@@ -174,9 +174,11 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
                                       nb)
         parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
-    sums, layout = pack(parts, nb)
-    return Blocks('stationary', channels, labels, lay['stratum'], sums, layout,
-                  {'integer': integer})
+    if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
+        lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
+    sums, layout = pack(parts, nb, lay['by_stratum'])
+    return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], sums,
+                  layout, {'integer': integer})
 
 
 def _upper_products(y: np.ndarray) -> np.ndarray:
