@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from khepera_noise_ros.gap import blocklength, compound, fit, statistics, target
+from khepera_noise_ros.gap import blockcounts, blocklength, compound, fit, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import Blocks, pack
 from khepera_noise_ros.gap.fitbase import Candidate
@@ -88,7 +88,7 @@ def test_mode_and_residue_counts_equal_reading_by_reading_counts(samples, length
         (0, 1, 2, 3), step=4.0, origin=1.0)])
     b = statistics.stationary_blocks(rec, rec.channels_used, length)
     lay = statistics._layout(rec, length)
-    assert (lay['largest'] >= 1 << statistics.DIGIT) == (length > 100)
+    assert (lay['largest'] >= 1 << blockcounts.DIGIT) == (length > 100)
     per_block = np.zeros((lay['nb'],) + rec.readings.shape[1:] + (len(statistics.MODULI),))
     np.add.at(per_block, lay['block'], _residue_plain(rec.readings)[lay['order']])
     modes = np.zeros((lay['nb'], rec.readings.shape[1]))

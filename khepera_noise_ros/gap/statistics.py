@@ -21,7 +21,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
-from . import blocklength, pileup
+from . import blockcounts, blocklength, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 
@@ -142,7 +142,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     y32 = yo.astype(np.float32)
     upper = np.triu_indices(len(channels))
     s2 = np.zeros((nb, len(channels), len(channels)))
-    s2[:, upper[0], upper[1]] = _block_sum(block, _upper_products(y32), nb)
+    s2[:, upper[0], upper[1]] = _block_sum(block, blockcounts.upper_products(y32), nb)
     s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
     parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
@@ -155,15 +155,16 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         low = int(x.min()) if x.size else 0
         xi = (x - low).astype(np.int64) if x.size else np.zeros(x.shape, np.int64)
         span = int(xi.max()) + 1 if x.size else 1
-        modes = _cell_modes(xi, cell, len(labels), span) + low
+        modes = blockcounts.cell_modes(xi, cell, len(labels), span) + low
         on_mode = xo == modes[inorder(cell)]
-        table = _on_modal_residue(xi, low, span).reshape(span * len(channels), len(MODULI))
+        table = blockcounts.on_modal_residue(xi, low, span, MODULI).reshape(
+            span * len(channels), len(MODULI))
         at = inorder(xi) * len(channels) + np.arange(len(channels))[None, :]
         edge = inorder(pileup.edge_hits(x))
         if 'largest' not in lay:
             lay['largest'] = int(np.bincount(lay['block']).max()) if nb else 0
-        if lay['largest'] < 1 << DIGIT:
-            parts.update(_counted(block, nb, on_mode, table, at, edge))
+        if lay['largest'] < 1 << blockcounts.DIGIT:
+            parts.update(blockcounts.counted(block, nb, on_mode, table, at, edge))
         else:
             parts['at_mode'] = _block_sum(block, on_mode.astype(np.float32), nb)
             parts['residue'] = _block_sum(block, np.take(table, at, axis=0), nb)
@@ -179,40 +180,6 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     sums, layout = pack(parts, nb, lay['by_stratum'])
     return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], sums,
                   layout, {'integer': integer})
-
-
-def _upper_products(y: np.ndarray) -> np.ndarray:
-    """(N, C (C + 1) / 2) products y_k y_m, k <= m, in ``np.triu_indices`` order."""
-    c = y.shape[1]
-    out = np.empty((y.shape[0], c * (c + 1) // 2), y.dtype)
-    at = 0
-    for k in range(c):
-        np.multiply(y[:, k:k + 1], y[:, k:], out=out[:, at:at + c - k])
-        at += c - k
-    return out
-
-
-DIGIT = 7     # bits per count when a block's 0/1 indicators are counted packed together
-
-
-def _counted(block: tuple, nb: int, on_mode: np.ndarray, table: np.ndarray, at: np.ndarray,
-             edge: np.ndarray) -> dict:
-    """Per block and channel, how many samples are at the cell's mode, on each modal
-    residue and at each pile end: the nine 0/1 indicators of a sample packed as digits of
-    ``DIGIT`` bits in one integer and summed at once (exact while every block has fewer
-    than 2 ** ``DIGIT`` samples, the same counts as summing each indicator)."""
-    shifts = DIGIT * np.arange(2 + len(MODULI) + 1, dtype=np.int64)
-    residue = (table.astype(np.int64) << shifts[1:1 + len(MODULI)]).sum(axis=1)
-    code = on_mode.astype(np.int64) + np.take(residue, at)
-    code += edge[..., 0].astype(np.int64) << shifts[1 + len(MODULI)]
-    code += edge[..., 1].astype(np.int64) << shifts[2 + len(MODULI)]
-    starts, targets, dense = block
-    counts = np.zeros((nb, code.shape[1]), np.int64)
-    if starts.size:
-        counts[targets] = np.add.reduceat(code, starts, axis=0)
-    digits = ((counts[..., None] >> shifts) & ((1 << DIGIT) - 1)).astype(np.float64)
-    return {'at_mode': digits[..., 0], 'residue': digits[..., 1:1 + len(MODULI)],
-            'edge': digits[..., 1 + len(MODULI):]}
 
 
 def _transitions(rec: Recording, lay: dict, x: np.ndarray, blocks: int,
@@ -306,31 +273,6 @@ def _lagged(lay: dict, y: np.ndarray, blocks: int) -> tuple[np.ndarray, np.ndarr
         counts[:, li] = count
         sums[:, li] = _block_sum(segments, y[hit] * y[partner], blocks)
     return counts, sums
-
-
-def _cell_modes(xi: np.ndarray, cell: np.ndarray, cells: int, span: int) -> np.ndarray:
-    """(cells, C) the most common reading of each channel in each cell (``xi``: integer
-    readings less their least, all below ``span``)."""
-    channels = xi.shape[1]
-    code = ((cell[:, None] * channels + np.arange(channels)[None, :]) * span + xi).ravel()
-    counts = np.bincount(code, minlength=cells * channels * span)
-    return counts.reshape(cells, channels, span).argmax(axis=2)
-
-
-def _on_modal_residue(xi: np.ndarray, low: int, span: int) -> np.ndarray:
-    """(span, C, len(MODULI)) float32: 1 where reading ``low`` + v of a channel lies on
-    that channel's most common residue modulo each step.  Residues are counted from
-    each channel's histogram of readings, not reading by reading."""
-    channels = xi.shape[1]
-    hist = np.bincount((xi + span * np.arange(channels)[None, :]).ravel(),
-                       minlength=channels * span).reshape(channels, span)
-    residues = np.mod(np.arange(low, low + span)[:, None], np.array(MODULI)[None, :])
-    out = np.zeros((span, channels, len(MODULI)), np.float32)
-    for j, q in enumerate(MODULI):
-        onehot = (residues[:, j, None] == np.arange(q)[None, :]).astype(np.int64)
-        modal = (hist @ onehot).argmax(axis=1)                       # (C,)
-        out[:, :, j] = residues[:, j, None] == modal[None, :]
-    return out
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
