@@ -280,7 +280,8 @@ def drift(target: Target, c: Comparison) -> Candidate:
     channels = _channels(target)
     evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
-    shared = moved or len(idx) > 1 and \
+    # window means of a fast shared noise are shared too: own wanders are not
+    shared = moved or len(idx) > 1 and not own and \
         evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
                          if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
@@ -305,10 +306,15 @@ def drift(target: Target, c: Comparison) -> Candidate:
         sd0 = max(sd0, change['sd'])
         tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
 
+    # the own wanders' correlation time bounds the refinement (else it can drift off to
+    # a white or a constant proxy for other effects)
+    span = (max(tau0 / 4, MIN_TIME_CONSTANT), tau0 * 4) if own and not moved else \
+        (MIN_TIME_CONSTANT, 1e5)
+
     def make(x, shared=shared):
         # bounded so that the model can always run: a time constant of 0 has no AR(1)
         sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), 1e-5, 2.0))
-        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), MIN_TIME_CONSTANT, 1e5))
+        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *span))
         return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
