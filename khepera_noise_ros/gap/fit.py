@@ -306,22 +306,22 @@ def drift(target: Target, c: Comparison) -> Candidate:
         sd0 = max(sd0, change['sd'])
         tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
 
-    # the own wanders' correlation time bounds the refinement (else it can drift off to
-    # a white or a constant proxy for other effects)
-    span = (max(tau0 / 4, MIN_TIME_CONSTANT), tau0 * 4) if own and not moved else \
-        (MIN_TIME_CONSTANT, 1e5)
+    # the own wanders' size and correlation time bound the refinement (else it drifts off
+    # to a white, a constant or a large proxy for other effects)
+    bounds = ((sd0 / 3, sd0 * 3), (max(tau0 / 4, MIN_TIME_CONSTANT), tau0 * 4)) \
+        if own and not moved else ((1e-5, 2.0), (MIN_TIME_CONSTANT, 1e5))
 
     def make(x, shared=shared):
         # bounded so that the model can always run: a time constant of 0 has no AR(1)
-        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), 1e-5, 2.0))
-        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *span))
+        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), *bounds[0]))
+        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *bounds[1]))
         return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
                           [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
                           [math.log(sd0), math.log(tau0 * 2.0)]]})
     effect = make(result.x)
-    if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
+    if len(sensors) > 1 and not (own and not moved):   # weak evidence for sharing: try both
         other = make(result.x, not shared)
         if target.objective([other]) < result.fun:
             effect = other
