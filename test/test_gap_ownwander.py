@@ -50,3 +50,12 @@ def test_the_drift_fitter_finds_each_sensors_wander_given_the_flicker(protocol):
     assert set(cand.effect.sensors) >= set(DRIFTING), cand.note
     assert not cand.effect.shared
     assert 0.5 * DRIFT.sd < cand.effect.sd < 2.0 * DRIFT.sd, cand.effect
+
+
+def test_steady_sensors_beside_strongly_drifting_ones_are_not_called_wandering(protocol):
+    """The mean of the other sensors carries their wanders into a steady sensor's own
+    part; the shared part is then taken from the steady sensors alone."""
+    strong = fx.TemporalDrift((0, 1, 2, 3), 0.04, 40.0, False)
+    rec = recorded(protocol, [strong, FLICKER], seed=13)
+    found = _wandering(rec, [FLICKER])
+    assert set(found) == {0, 1, 2, 3}, {s: round(v['z'], 1) for s, v in found.items()}

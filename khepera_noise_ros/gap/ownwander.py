@@ -8,7 +8,8 @@ residual of the other sensors) is taken out first; what is left is the sensor's
 own noise, where a wander of its own keeps its full share.  Real against
 simulated, per sensor: the mean autocorrelation of that own part over ``LAGS``,
 its standard error from the spread over runs, one-sided z (a wander only adds
-autocorrelation), Holm over sensors.
+autocorrelation), Holm over sensors; wandering sensors are found one at a time and
+left out of the shared part (``wandering``).
 """
 from __future__ import annotations
 
@@ -24,11 +25,14 @@ MIN_RUN = 24           # shorter runs give no usable autocorrelation at the long
 MIN_LEVEL = 20.0       # readings; darker cells carry no usable own part (rounding)
 
 
-def _own(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _own(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Arrays over runs: (runs, lags, sensors) autocorrelation of each sensor's own part
     at ``LAGS``, (runs, sensors) its lag-1 autocovariance relative to the level, and
-    (runs, sensors) a usable mask."""
+    (runs, sensors) a usable mask.  The shared part is the mean of the other sensors
+    among ``shared_by`` (positions in the used channels; default all)."""
     used = list(rec.channels_used)
+    ref = np.zeros(len(used), bool)
+    ref[list(range(len(used))) if shared_by is None else list(shared_by)] = True
     acf, cov, ok = [], [], []
     for r in replay.runs(rec):
         if r.size < MIN_RUN + SKIP or len(used) < 3:
@@ -36,8 +40,9 @@ def _own(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         y = rec.readings[r[SKIP:]][:, used].astype(np.float64)
         level = y.mean(axis=0)
         y = y - level
-        total = y.sum(axis=1, keepdims=True)
-        others = (total - y) / (len(used) - 1)          # mean of the other sensors
+        total = y[:, ref].sum(axis=1, keepdims=True)
+        count = ref.sum() - ref                          # the others among ``shared_by``
+        others = (total - y * ref) / np.maximum(count, 1)
         with np.errstate(invalid='ignore', divide='ignore'):
             beta = (y * others).sum(axis=0) / (others * others).sum(axis=0)
         e = y - np.nan_to_num(beta) * others
@@ -55,12 +60,12 @@ def _own(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(acf), np.array(cov), np.array(ok)
 
 
-def _pooled(recs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    parts = [_own(rec) for rec in recs]
+def _pooled(recs, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    parts = [_own(rec, shared_by) for rec in recs]
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
 
 
-def excess(real: list, sim: list) -> dict:
+def excess(real: list, sim: list, shared_by=None) -> dict:
     """{sensor: {'z', 'p' (of the mean over ``LAGS``), 'acf' {lag: real - simulated},
     'sd' (the wander's sd as a fraction of the level, from the excess lag-1
     autocovariance)}} of every sensor in the stationary recordings ``real`` against
@@ -68,7 +73,7 @@ def excess(real: list, sim: list) -> dict:
     if not real or not sim:
         return {}
     used = list(real[0].channels_used)
-    (ar, cr, okr), (as_, cs, oks) = _pooled(real), _pooled(sim)
+    (ar, cr, okr), (as_, cs, oks) = _pooled(real, shared_by), _pooled(sim, shared_by)
     out = {}
     for k, s in enumerate(used):
         x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
@@ -88,8 +93,32 @@ def excess(real: list, sim: list) -> dict:
 
 def wandering(real: list, sim: list) -> dict:
     """The sensors of ``excess`` whose own part is more autocorrelated than simulated
-    (one-sided, Holm over sensors at ``ALPHA``)."""
-    ex = excess(real, sim)
+    (one-sided, Holm over the sensors tested at ``ALPHA``).
+
+    The mean of the others carries their wanders into a steady sensor's own part (1/(n-1)
+    of each), so the sensors are taken one at a time: the most significant is called
+    wandering and left out of the shared part, and the rest tested again, while two or
+    more remain to make the shared part from (two that are both significant are both
+    called wandering: with no steady sensor left, each carries the other's wander)."""
+    if not real:
+        return {}
+    used = list(real[0].channels_used)
+    shared_by, found = list(range(len(used))), {}
+    while len(shared_by) >= 2:
+        ex = excess(real, sim, shared_by)
+        left = _significant({s: v for s, v in ex.items() if used.index(s) in shared_by})
+        if not left:
+            break
+        if len(shared_by) == 2 and len(left) == 2:     # no steady sensor left to tell
+            found.update(left)
+            break
+        top = max(left, key=lambda s: left[s]['z'])
+        found[top] = left[top]
+        shared_by.remove(used.index(top))
+    return dict(sorted(found.items()))
+
+
+def _significant(ex: dict) -> dict:
     sensors = sorted(ex)
     if not sensors:
         return {}
