@@ -280,8 +280,7 @@ def drift(target: Target, c: Comparison) -> Candidate:
     channels = _channels(target)
     evidence = _fast_evidence(target, c, 'slow')
     idx = [channels.index(s) for s in sensors]
-    # window means of a fast shared noise are shared too: own wanders are not
-    shared = moved or len(idx) > 1 and not own and \
+    shared = moved or len(idx) > 1 and \
         evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: np.mean([r - s for k, r, s, z in acf
                          if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
@@ -321,7 +320,7 @@ def drift(target: Target, c: Comparison) -> Candidate:
                           [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
                           [math.log(sd0), math.log(tau0 * 2.0)]]})
     effect = make(result.x)
-    if len(sensors) > 1 and not (own and not moved):   # weak evidence for sharing: try both
+    if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
         other = make(result.x, not shared)
         if target.objective([other]) < result.fun:
             effect = other
