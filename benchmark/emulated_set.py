@@ -51,15 +51,11 @@ def simulator(config) -> SimConfig:
 
 
 def true_effects(config) -> dict:
-    """The robot's enabled effects in the diagnosis's vocabulary, true parameters."""
+    """The robot's enabled effects in the diagnosis's vocabulary, true parameters, in the
+    order the robot applies them (calibration, drift, flicker, group noise): the
+    simulator applies effects in the order given, and the flicker's size depends on the
+    calibrated level."""
     out = {}
-    c = config.correlated_noise
-    if c.enabled:
-        out['correlated_noise'] = fx.CorrelatedNoise(tuple(map(tuple, c.location)), c.strength)
-    f = config.intensity_dependent_noise
-    if f.enabled:
-        out['intensity_dependent_noise'] = fx.IntensityDependentNoise(
-            tuple(f.location), f.strength, f.exponent, 525.0, 0.0, 'dark', True)
     g = config.sensor_gain_offset
     if g.enabled:
         draws = np.random.default_rng([g.unit_seed]).standard_normal((2, 8))
@@ -70,6 +66,13 @@ def true_effects(config) -> dict:
     if d.enabled:
         out['temporal_drift'] = fx.TemporalDrift(tuple(d.location), d.strength,
                                                  d.time_constant, d.shared)
+    f = config.intensity_dependent_noise
+    if f.enabled:
+        out['intensity_dependent_noise'] = fx.IntensityDependentNoise(
+            tuple(f.location), f.strength, f.exponent, 525.0, 0.0, 'dark', True)
+    c = config.correlated_noise
+    if c.enabled:
+        out['correlated_noise'] = fx.CorrelatedNoise(tuple(map(tuple, c.location)), c.strength)
     t = config.actuator_turn_error
     if t.enabled:
         out['actuator_turn_error'] = fx.ActuatorTurnError(t.scale, t.strength)
@@ -106,14 +109,27 @@ def oracle(config, recs, sim_seeds: int = 1) -> None:
             rest = b.compare([e for n, e in true.items() if n != name])
             reps = b.replicate_discrepancies(rest)
             p = compound.paired_p(reps, all_reps, rest.discrepancy, d_all)
-            closed = compound._part(rest, True) - compound._part(all_cmp, True)
+            closed = (compound._part(rest, 'closed_loop')
+                      - compound._part(all_cmp, 'closed_loop'))
             rows[name].append((rest.discrepancy - d_all, (rest.discrepancy - d_all) / d_all,
-                               p, closed))
+                               p, closed, (rest.discrepancy - d_all) / d0))
+        if seed == 0:
+            print('    what all six true leave, by statistic: ' + ', '.join(
+                f'{f} {v:.0f}' for f, v in _by_family(all_cmp)[:5]))
     for name, r in rows.items():
         r = np.array(r)
         print(f'  without {name:27s} adds {r[:, 0].mean():+9.1f} (sd {r[:, 0].std():7.1f}) '
               f'= {r[:, 1].mean():+7.1%} of all-six\'s; p <= 0.05 in {np.sum(r[:, 2] <= 0.05)}'
-              f'/{len(r)}; closed-loop part {r[:, 3].mean():+8.1f}')
+              f'/{len(r)}; closed-loop part {r[:, 3].mean():+8.1f}; '
+              f'{r[:, 4].mean():+.2%} of none\'s')
+
+
+def _by_family(c) -> list:
+    """[(statistic family, its part of the discrepancy)], largest first."""
+    out: dict = {}
+    for k, z in zip(c.keys, c.z):
+        out[k.family] = out.get(k.family, 0.0) + max(abs(z) - 2.0, 0.0) ** 2
+    return sorted(out.items(), key=lambda t: -t[1])
 
 
 def diagnosis(config, recs, label: str) -> None:

@@ -6,7 +6,7 @@ the diagnosis sees only the recording and the plain simulator's configuration.
 import numpy as np
 import pytest
 
-from khepera_noise_ros.gap import diagnose, remainder, replay
+from khepera_noise_ros.gap import diagnose, fit, remainder, replay
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.simconfig import SimConfig
 from khepera_noise_ros.gap.target import Target
@@ -128,9 +128,11 @@ def test_latency_and_an_offset_lattice_are_found_together():
 
 
 EMULATED_EPISODES = 120     # a 10% turn slip and 0.92 scale show in 120 episodes, not in 30
+EMULATED_LONG = 240         # samples per heading: the robot's own drift of 0.4% shows
 
 
-def _emulated_robot_recordings(seed: int = 3, episodes: int = EMULATED_EPISODES):
+def _emulated_robot_recordings(seed: int = 3, episodes: int = EMULATED_EPISODES,
+                               samples: int = 60):
     """Stationary and closed-loop recordings of the emulated robot with its default
     effects, recorded as the blind benchmark records them (more closed-loop episodes
     than its 30: ``benchmark/emulated_set.py`` measures what each effect needs)."""
@@ -142,7 +144,7 @@ def _emulated_robot_recordings(seed: int = 3, episodes: int = EMULATED_EPISODES)
     from test_gap_support import GENOME
     config = EffectsConfig.real_robot()
     world = robot(config, seed)
-    return config, [record_stationary(world, STATIONARY, samples=60),
+    return config, [record_stationary(world, STATIONARY, samples=samples),
                     record_closed_loop(world, np.array(GENOME), episodes=episodes, seed=seed)]
 
 
@@ -177,9 +179,31 @@ def test_on_the_emulated_robot_the_turn_error_is_found_beside_the_sensor_effects
     assert abs(turn['parameters']['scale'] - config.actuator_turn_error.scale) < 0.2
 
 
-@pytest.mark.xfail(strict=True, reason='the default robot\'s group noise (0.3%) and drift '
-                   '(0.4%) change no held-out statistic beyond chance in runs of 60 samples, '
-                   'even with their true parameters (benchmark/emulated_set.py; '
+def test_on_the_emulated_robot_with_longer_runs_its_own_drift_is_fitted():
+    """With 240 samples per heading, given the robot's flicker, calibration and latency
+    (the oracle's: ``benchmark/emulated_set.py``), each sensor's own drift (0.4%, 50
+    samples) shows in the part of its noise it does not share with the others
+    (``gap.ownwander``): the drift's fitter finds it on every sensor, one wander each,
+    near its size and time constant.  The flicker alone swamped it before."""
+    config, recs = _emulated_robot_recordings(samples=EMULATED_LONG, episodes=2)
+    import emulated_set as es           # on the path once the recordings are made
+    fit_part, _ = es.parts(recs[:1], config)
+    true = es.true_effects(config)
+    names = ('sensor_gain_offset', 'intensity_dependent_noise', 'sensor_latency')
+    given = fit_part.with_given([true[n] for n in names])
+    cand = fit.drift(given, given.compare(replicates=40))
+    assert cand.effect is not None, cand.note
+    assert cand.effect.sensors == tuple(range(8)) and not cand.effect.shared, cand.note
+    assert 0.5 < cand.effect.sd / config.temporal_drift.strength < 2.0, cand.effect
+    assert 0.25 < cand.effect.time_constant / config.temporal_drift.time_constant < 4, \
+        cand.effect
+
+
+@pytest.mark.xfail(strict=True, reason='the default robot\'s group noise (0.3%) lowers no '
+                   'held-out discrepancy even with its true parameters at 60 to 1,200 '
+                   'samples per heading; its drift (0.4%) is fitted from 240 samples on, '
+                   'significant, but removes 0.1-0.3% of the gap before any effect, under '
+                   'the compound\'s size rules (benchmark/emulated_set.py; '
                    'docs/diagnosis.md, Limitations)')
 def test_the_emulated_robots_default_effects_are_found_as_a_set(emulated):
     config, result = emulated

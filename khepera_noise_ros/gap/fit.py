@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import closednoise, fitturn, limits, pileup, spreadlaw, timesig
+from . import closednoise, fitturn, limits, ownwander, pileup, spreadlaw, timesig
 from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
 from .fitbase import golden as _golden, rows as _rows
 from .groups import cluster, excess_evidence, part_evidence
@@ -272,7 +272,8 @@ def drift(target: Target, c: Comparison) -> Candidate:
     name = fx.TemporalDrift.name
     acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')] or \
         [(k, r, s, z) for k, r, s, se, z in _rows(c, 'loop_residual_autocorrelation')]
-    sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c))))
+    own = ownwander.of_target(target)       # each sensor's own wander, shared noise out
+    sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c)) | set(own)))
     change = timesig.of_target(target)
     moved = bool(change and change['significant'])   # levels moving together over time
     if moved:
@@ -293,20 +294,30 @@ def drift(target: Target, c: Comparison) -> Candidate:
     if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
         rho[3] = max(rho[1], 0.0) ** 3
     a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
+    if own:                              # the own parts' excess, lag 10 against lag 1
+        r1, r10 = (np.median([v['acf'][lag] for v in own.values()]) for lag in (1, 10))
+        a = float(np.clip((max(r10, 1e-3) / max(r1, 1e-3)) ** (1 / 9), 0.3, 0.995))
     tau0 = -1.0 / math.log(a)
     spread = _by_condition(c, 'spread')
     level = _by_condition(c, 'level')
     ratio = [spread[cond][s][0] / level[cond][s][1] for cond in spread for s in sensors
              if level.get(cond, {}).get(s, (0, 0))[1] > 0]
     sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
+    if own:
+        sd0 = float(np.median([v['sd'] for v in own.values()])) or sd0
     if moved:             # start from the shared factors' spread, slow over the runs
         sd0 = max(sd0, change['sd'])
         tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
 
+    # the own wanders' size and correlation time bound the refinement (else it drifts off
+    # to a white, a constant or a large proxy for other effects)
+    bounds = ((sd0 / 3, sd0 * 3), (max(tau0 / 4, MIN_TIME_CONSTANT), tau0 * 4)) \
+        if own and not moved else ((1e-5, 2.0), (MIN_TIME_CONSTANT, 1e5))
+
     def make(x, shared=shared):
         # bounded so that the model can always run: a time constant of 0 has no AR(1)
-        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), 1e-5, 2.0))
-        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), MIN_TIME_CONSTANT, 1e5))
+        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), *bounds[0]))
+        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *bounds[1]))
         return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [

@@ -25,19 +25,60 @@ MIN_CHANGE = 0.005     # and a change must move the factors by this sd beyond th
 
 
 def _factors(rec, reference: dict, sensors) -> list[tuple]:
-    """[(run samples, cell, shared factor)] of a stationary recording against the
-    simulated cell levels ``reference`` {(condition, heading): level per sensor}."""
+    """[(run samples, cell, run means, simulated levels, fast variance of the run means)]
+    of a stationary recording against the simulated cell levels ``reference``
+    {(condition, heading): level per sensor}; the fast variance (per sensor, first
+    differences / 2n) is how much white noise alone moves a run's mean."""
     out = []
     for r in replay.runs(rec):
         cell = (str(rec.condition[r[0]]), float(np.round(rec.heading_deg[r[0]], 1)))
         ref = reference.get(cell)
         if ref is None or r.size < 2:
             continue
-        mean = rec.readings[r][:, sensors].mean(axis=0)
+        x = rec.readings[r][:, sensors].astype(np.float64)
+        mean = x.mean(axis=0)
         ok = (ref > MIN_LEVEL) & np.isfinite(mean)
         if ok.sum() >= MIN_SENSORS:
-            out.append((r, cell, float(np.median(mean[ok] / ref[ok]))))
+            fast = np.diff(x, axis=0).mean(axis=1)      # the part all sensors share
+            white = float(np.mean(fast * fast)) / 2.0 / r.size
+            out.append((r, cell, mean, ref, white))
     return out
+
+
+def _shared(rows, rounds: int = 3) -> np.ndarray:
+    """Each run's shared factor with every sensor's own calibration line taken out.
+
+    A fixed gain and offset per sensor (reading = a + b x level) make the ratio of a
+    sensor's mean to its simulated level differ from cell to cell, so the median
+    ratio would vary over the runs with no change in time.  Factors and lines are
+    fitted in turn: the factor is the median over sensors of mean / line(level), the
+    lines fit mean / factor; the factors' geometric mean is 1 (the lines hold the scale).
+    ``rounds`` 1: the plain median ratios (no lines, the scale kept).
+    """
+    mean = np.array([m for _, _, m, _, _ in rows])
+    ref = np.array([f for _, _, _, f, _ in rows])
+    ok = (ref > MIN_LEVEL) & np.isfinite(mean)
+    a, b = np.zeros(mean.shape[1]), np.ones(mean.shape[1])
+    for _ in range(rounds):
+        line = a + b * ref
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.where(ok & (line > 0), mean / line, np.nan)
+        factor = np.nanmedian(ratio, axis=1)
+        if rounds > 1:
+            factor = factor / np.exp(np.mean(np.log(factor)))
+        for s in range(mean.shape[1]):
+            use = ok[:, s]
+            if use.sum() >= MIN_RUNS and np.ptp(ref[use, s]) >= 1.0:
+                b[s], a[s] = np.polyfit(ref[use, s], mean[use, s] / factor[use], 1)
+    return factor
+
+
+MIN_RUNS = 4           # runs a sensor needs for its own calibration line
+
+
+def _level_of(rows) -> np.ndarray:
+    """Each run's mean level (over sensors) in readings, for the fast variance's scale."""
+    return np.array([np.mean(m[(f > MIN_LEVEL) & np.isfinite(m)]) for (_, _, m, f, _) in rows])
 
 
 def _levels(recs, sensors) -> dict:
@@ -52,8 +93,12 @@ def _levels(recs, sensors) -> dict:
 def shared_change(real: list, sim: list, sensors) -> dict | None:
     """The shared change over time in stationary recordings ``real`` against their
     replays ``sim`` (more episodes: copies), or None when there is none or no way to
-    tell: {'p_value', 'ratio' (real over simulated factor variance), 'runs': [(run
-    indices into the recording, factor)] per real recording, 'sd' (of the factors)}."""
+    tell: {'p_value', 'ratio' (real over expected factor variance), 'runs': [(run
+    indices into the recording, factor)] per real recording, 'sd' (of the factors)}.
+
+    Expected is the simulator's factor variance plus what fast noise shared by the
+    sensors adds to the real run means beyond the simulator's (a room's flicker moves a
+    run's mean by its sd / sqrt(n): fast, not a change over time)."""
     sensors = list(sensors)
     if not real or not sim:
         return None
@@ -63,21 +108,31 @@ def shared_change(real: list, sim: list, sensors) -> dict | None:
     flat = [row for rows in rows_real for row in rows]
     if len(flat) < 3 or len(rows_sim) < 3:
         return None
-    v_real, d_real = _about_mean(flat)
-    v_sim, d_sim = _about_mean(rows_sim)
+    # judged with the lines (no calibration can fake a change); the runs' factors are
+    # the plain ratios: where a condition has one run, its lines absorb part of a change
+    f_real, f_sim = _shared(flat), _shared(rows_sim)
+    plain = _shared(flat, rounds=1)
+    v_real, d_real = _about_mean(f_real)
+    v_sim, d_sim = _about_mean(f_sim)
     if d_real < 2 or d_sim < 2 or v_sim <= 0:
         return None
-    ratio = v_real / v_sim
+    fast = [float(np.mean([w for *_, w in rows] / np.square(_level_of(rows))))
+            for rows in (flat, rows_sim)]
+    expected = v_sim + max(fast[0] - fast[1], 0.0)
+    ratio = v_real / expected
     p = float(sps.f.sf(ratio, d_real, d_sim))
-    excess = float(np.sqrt(max(v_real - v_sim, 0.0)))
+    excess = float(np.sqrt(max(v_real - expected, 0.0)))
+    runs, k = [], 0
+    for rows in rows_real:
+        runs.append([(r, float(f)) for (r, *_), f in zip(rows, plain[k:k + len(rows)])])
+        k += len(rows)
     return {'p_value': p, 'ratio': float(ratio), 'excess_sd': excess,
             'significant': p < ALPHA and excess >= MIN_CHANGE,
-            'runs': [[(r, f) for r, _, f in rows] for rows in rows_real],
-            'sd': float(np.std([f for *_, f in flat]))}
+            'runs': runs, 'sd': float(np.std(plain))}
 
 
-def _about_mean(rows) -> tuple[float, int]:
-    v = np.log([f for *_, f in rows])
+def _about_mean(factors) -> tuple[float, int]:
+    v = np.log(factors)
     return float(np.var(v, ddof=1)), v.size - 1
 
 

@@ -1,0 +1,135 @@
+"""Each sensor's own slow wander, seen beside noise the sensors share.
+
+A drift of each sensor's gain (its own AR(1) wander) adds autocorrelation to that
+sensor's residuals, but a fast noise shared by all sensors (a room's flicker) can
+be far larger and white, so the residuals' autocorrelation hardly moves.  Within
+each run the part a sensor shares with the others (its regression on the mean
+residual of the other sensors) is taken out first; what is left is the sensor's
+own noise, where a wander of its own keeps its full share.  Real against
+simulated, per sensor: the mean autocorrelation of that own part over ``LAGS``,
+its standard error from the spread over runs, one-sided z (a wander only adds
+autocorrelation), Holm over sensors; wandering sensors are found one at a time and
+left out of the shared part (``wandering``).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats as sps
+
+from . import replay
+from .where import ALPHA, holm
+
+LAGS = (1, 3, 10)
+SKIP = 3               # first samples of a run left out: the step after a heading change
+MIN_RUN = 24           # shorter runs give no usable autocorrelation at the longest lag
+MIN_LEVEL = 20.0       # readings; darker cells carry no usable own part (rounding)
+
+
+def _own(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Arrays over runs: (runs, lags, sensors) autocorrelation of each sensor's own part
+    at ``LAGS``, (runs, sensors) its lag-1 autocovariance relative to the level, and
+    (runs, sensors) a usable mask.  The shared part is the mean of the other sensors
+    among ``shared_by`` (positions in the used channels; default all)."""
+    used = list(rec.channels_used)
+    ref = np.zeros(len(used), bool)
+    ref[list(range(len(used))) if shared_by is None else list(shared_by)] = True
+    acf, cov, ok = [], [], []
+    for r in replay.runs(rec):
+        if r.size < MIN_RUN + SKIP or len(used) < 3:
+            continue
+        y = rec.readings[r[SKIP:]][:, used].astype(np.float64)
+        level = y.mean(axis=0)
+        y = y - level
+        total = y[:, ref].sum(axis=1, keepdims=True)
+        count = ref.sum() - ref                          # the others among ``shared_by``
+        others = (total - y * ref) / np.maximum(count, 1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            beta = (y * others).sum(axis=0) / (others * others).sum(axis=0)
+        e = y - np.nan_to_num(beta) * others
+        den = (e * e).sum(axis=0)
+        good = (den > 0) & (level > MIN_LEVEL)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            a = np.array([(e[:-k] * e[k:]).sum(axis=0) / den for k in LAGS])
+            c = (e[:-1] * e[1:]).sum(axis=0) / (e.shape[0] - 1) / np.square(level)
+        acf.append(np.where(good, a, np.nan))
+        cov.append(np.where(good, c, np.nan))
+        ok.append(good)
+    n = len(used)
+    if not acf:
+        return np.empty((0, len(LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
+    return np.array(acf), np.array(cov), np.array(ok)
+
+
+def _pooled(recs, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    parts = [_own(rec, shared_by) for rec in recs]
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+
+def excess(real: list, sim: list, shared_by=None) -> dict:
+    """{sensor: {'z', 'p' (of the mean over ``LAGS``), 'acf' {lag: real - simulated},
+    'sd' (the wander's sd as a fraction of the level, from the excess lag-1
+    autocovariance)}} of every sensor in the stationary recordings ``real`` against
+    their replays ``sim``."""
+    if not real or not sim:
+        return {}
+    used = list(real[0].channels_used)
+    (ar, cr, okr), (as_, cs, oks) = _pooled(real, shared_by), _pooled(sim, shared_by)
+    out = {}
+    for k, s in enumerate(used):
+        x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
+        if x.size < 3 or y.size < 3:
+            continue
+        se = np.sqrt(x.var(ddof=1) / x.size + y.var(ddof=1) / y.size)
+        if not se > 0:
+            continue
+        z = float((x.mean() - y.mean()) / se)
+        extra = np.nanmean(cr[okr[:, k], k]) - np.nanmean(cs[oks[:, k], k])
+        lags = ar[okr[:, k], :, k].mean(axis=0) - as_[oks[:, k], :, k].mean(axis=0)
+        out[s] = {'z': z, 'p': float(sps.norm.sf(z)),
+                  'acf': {lag: float(v) for lag, v in zip(LAGS, lags)},
+                  'sd': float(np.sqrt(max(extra, 0.0)))}
+    return out
+
+
+def wandering(real: list, sim: list) -> dict:
+    """The sensors of ``excess`` whose own part is more autocorrelated than simulated
+    (one-sided, Holm over the sensors tested at ``ALPHA``).
+
+    The mean of the others carries their wanders into a steady sensor's own part (1/(n-1)
+    of each), so the sensors are taken one at a time: the most significant is called
+    wandering and left out of the shared part, and the rest tested again, while two or
+    more remain to make the shared part from (two that are both significant are both
+    called wandering: with no steady sensor left, each carries the other's wander)."""
+    if not real:
+        return {}
+    used = list(real[0].channels_used)
+    shared_by, found = list(range(len(used))), {}
+    while len(shared_by) >= 2:
+        ex = excess(real, sim, shared_by)
+        left = _significant({s: v for s, v in ex.items() if used.index(s) in shared_by})
+        if not left:
+            break
+        if len(shared_by) == 2 and len(left) == 2:     # no steady sensor left to tell
+            found.update(left)
+            break
+        top = max(left, key=lambda s: left[s]['z'])
+        found[top] = left[top]
+        shared_by.remove(used.index(top))
+    return dict(sorted(found.items()))
+
+
+def _significant(ex: dict) -> dict:
+    sensors = sorted(ex)
+    if not sensors:
+        return {}
+    adjusted = holm(np.array([ex[s]['p'] for s in sensors]))
+    return {s: ex[s] for s, q in zip(sensors, adjusted) if q < ALPHA}
+
+
+def of_target(target) -> dict:
+    """``wandering`` of a fitting target's stationary recordings against its simulator
+    (with the effects it is given)."""
+    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    if not real:
+        return {}
+    return wandering(real, target.simulate(kinds=('stationary',)))
