@@ -20,7 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
-from . import blocklength, pileup
+from . import blocklength, dropout, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 
@@ -120,6 +120,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     labels, cell, runs = lay['labels'], lay['cell'], lay['runs']
     order, block, nb = lay['order'], lay['block'], lay['nb']
     x = rec.readings[:, list(channels)].astype(np.float64)
+    x, dropped = dropout.repair(x, runs)    # a dropout counts once: in its own family
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
     run_order, run_starts, run_sizes = lay['run_at']
@@ -149,6 +150,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         if integer else np.zeros((xo.shape[0], len(channels), len(MODULI)))
     parts['residue'] = _block_sum(block, residue, nb)
     parts['edge'] = _block_sum(block, pileup.edge_hits(x)[order], nb)
+    parts['dropped'] = _block_sum(block, dropped[order], nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, runs, x, lay['block_of'], nb,
                                                       run_means)
     sums, layout = pack(parts, nb)
@@ -351,6 +353,9 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
     for k, sensor in enumerate(ch):
         for j, end in enumerate(pileup.ENDS):
             add(Key('pileup', (sensor,), None, end), edge[:, k, j])
+    dropped = b.part(sums, 'dropped').sum(axis=1) / total[..., None]     # (R, C, 2)
+    for key, value in dropout.shares('dropout', ch, None, dropped):
+        add(key, value)
     if b.extra['integer']:
         for c in conditions:
             members = [s for s, lab in enumerate(b.strata) if lab[0] == c]

@@ -26,8 +26,8 @@ SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compa
 SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of copies
 # The pile at a sensor's ends (``gap.pileup``) locates and scores limits; its bootstrap
 # error ignores where an end falls, which a slow change moves, so only a limit is fitted
-# to it.
-LIMITS_ONLY = frozenset({'pileup'})
+# to it.  So are isolated readings at a sensor's extremes (``gap.dropout``).
+LIMITS_ONLY = frozenset({'pileup', 'dropout', 'closed_loop_dropout'})
 
 
 @dataclass
