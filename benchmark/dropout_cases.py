@@ -1,9 +1,10 @@
 """Dropouts alone and beside other effects: detection and the compound's choice (prints).
 
-    python benchmark/dropout_cases.py [--only NAME] [--replicates 40]
+    python benchmark/dropout_cases.py [--only NAME] [--replicates 40] [--samples 60]
+                                      [--episodes 24]
 
 Each case is a recording made by the simulator (``test_gap_support``: stationary,
-60 samples per heading and condition, or 24 closed-loop episodes of 60 steps) with an
+``--samples`` per heading and condition, or ``--episodes`` of 60 steps) with an
 effect of the vocabulary or none, in which readings are then replaced by hand: each
 reading of the chosen sensors, with probability ``rate``, reads ``value`` (a dropout).
 The diagnosis gets the edited recording and the plain simulator.  Per case it prints
@@ -50,10 +51,13 @@ def drop(rec, sensors, rate: float, value: float, seed: int):
     return out
 
 
+SIZE = {'samples': 60, 'episodes': 24}
+
+
 def recording(kind: str, effects, seed: int):
     if kind == 'closed':
-        return recorded(closed_loop_protocol(24), effects, seed=seed)
-    return recorded(stationary_protocol(samples=60), effects, seed=seed)
+        return recorded(closed_loop_protocol(SIZE['episodes']), effects, seed=seed)
+    return recorded(stationary_protocol(samples=SIZE['samples']), effects, seed=seed)
 
 
 # name: (kinds, other effects, dropout sensors, rate, value)
@@ -111,7 +115,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--only', action='append', default=None)
     ap.add_argument('--replicates', type=int, default=40)
+    ap.add_argument('--samples', type=int, default=60, help='per heading and condition')
+    ap.add_argument('--episodes', type=int, default=24, help='closed-loop episodes')
     args = ap.parse_args(argv)
+    SIZE.update(samples=args.samples, episodes=args.episodes)
     for name in args.only or CASES:
         print(run(name, args.replicates), flush=True)
     return 0
