@@ -19,6 +19,7 @@ episodes) and see the other statistics on readings with them repaired (``repair`
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
@@ -29,6 +30,7 @@ AWAY = 10.0          # readings: a dropout lies at least this far from the local
 SPREADS = 6.0        # ... and this many robust sds of the run (a normal tail: ~2e-9)
 NEAR = (-2, -1, 1, 2)    # the neighbours whose median is the local level
 STEADY = 2.0         # ... and this many times the largest change among the neighbours
+ISOLATED = 3         # of the four neighbours, at most one is at an extreme too
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
 
@@ -53,56 +55,88 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray]:
     first = np.cumsum(np.r_[0, sizes[:-1]])
     run_of = np.repeat(np.arange(len(runs)), sizes)
     xo = x[order].astype(np.float64)
-    with np.errstate(invalid='ignore'):
-        ends = (np.nanmin(xo, axis=0), np.nanmax(xo, axis=0))
+    if np.isnan(xo).any():
+        with np.errstate(invalid='ignore'), warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)     # a channel all NaN
+            ends = (np.nanmin(xo, axis=0), np.nanmax(xo, axis=0))
+    else:
+        ends = (xo.min(axis=0), xo.max(axis=0))
     at = [xo == v[None, :] for v in ends]
     rows = np.flatnonzero((at[0] | at[1]).any(axis=1))      # few: the extremes
-    neighbours = _neighbours(run_of, first, sizes)
-    near = np.abs(xo[rows] - _local(xo, neighbours[:, rows])) >= AWAY
+    near = np.abs(xo[rows] - _local(xo, _neighbours(run_of, first, sizes, NEAR, rows))) >= AWAY
+    candidate = (at[0][rows] | at[1][rows]) & near
     repaired = x
-    for k in np.flatnonzero(((at[0][rows] | at[1][rows]) & near).any(axis=0)):
-        around = xo[:, k][neighbours]                          # (4, N)
-        d = np.abs(xo[:, k] - _local(xo[:, k], neighbours))
-        scale = _scales(d, run_of, first, sizes)
+    for k in np.flatnonzero(candidate.any(axis=0)):
+        i = rows[candidate[:, k]]
+        col = xo[:, k]
+        # neighbours at an extreme themselves (a second dropout next to this one) are
+        # left out of the local level and of the neighbours' changes
+        around = col[_neighbours(run_of, first, sizes, NEAR, i)]    # (4, candidates)
+        around = np.where((around == ends[0][k]) | (around == ends[1][k]), np.nan, around)
+        count = np.isfinite(around).sum(axis=0)
+        level, lower = _middle(around)
+        d = np.abs(col[i] - level)
         # a light that sweeps past moves the neighbours too: the jump must stand
         # ``STEADY`` times above the neighbours' own changes
-        rough = np.max(np.abs(np.diff(around, axis=0)), axis=0)
-        far = (d >= AWAY) & (d >= SPREADS * scale[run_of]) & (d >= STEADY * rough)
-        lost = np.zeros(xo.shape[0], bool)
+        steps = np.abs(np.diff(around, axis=0))
+        rough = np.max(np.where(np.isfinite(steps), steps, 0.0), axis=0)
+        with np.errstate(invalid='ignore'):
+            far = (count >= ISOLATED) & (d >= AWAY) & (d >= STEADY * rough)
+        if not far.any():
+            continue
+        scale = _scales(col, run_of, first, sizes, np.unique(run_of[i[far]]))
+        far &= d >= SPREADS * scale[run_of[i]]
         for end in (0, 1):
-            mark = at[end][:, k] & far
+            mark = i[far & (col[i] == ends[end][k])]
             out[order[mark], k, end] = 1.0
-            lost |= mark
-        if lost.any():
+        if far.any():
             if repaired is x:
                 repaired = x.copy()
-            repaired[order[lost], k] = np.sort(around[:, lost], axis=0)[1]
+            # read as the lower middle of the neighbours left: a reading the sensor gave
+            repaired[order[i[far]], k] = lower[far]
     return repaired, out
 
 
-def _neighbours(run_of, first, sizes) -> np.ndarray:
-    """(4, N) indices of each sample's neighbours within its run (reflected at the
-    run's ends), samples ordered run by run."""
-    start, n = first[run_of], sizes[run_of]
-    j = (np.arange(run_of.size) - start)[None, :] + np.array(NEAR)[:, None]
+def _neighbours(run_of, first, sizes, offsets=NEAR, at=None) -> np.ndarray:
+    """(len(offsets), N) indices of each sample's (or each of ``at``'s) neighbours within
+    its run (reflected at the run's ends), samples ordered run by run."""
+    at = np.arange(run_of.size) if at is None else at
+    start, n = first[run_of[at]], sizes[run_of[at]]
+    j = (at - start)[None, :] + np.array(offsets)[:, None]
     j = np.where(j < 0, -j, j)
     j = np.where(j >= n, 2 * (n - 1) - j, j)
     return start + np.clip(j, 0, n - 1)
+
+
+def _middle(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(median, lower middle) over axis 0 of the finite values of ``v`` (NaN where none)."""
+    kept = np.sort(v, axis=0)                                   # NaN sorts last
+    count = np.isfinite(kept).sum(axis=0)
+    cols = np.arange(v.shape[1])
+    lower = kept[np.maximum(count - 1, 0) // 2, cols]
+    return 0.5 * (lower + kept[np.minimum(count // 2, v.shape[0] - 1), cols]), lower
+
+
+def _scales(col, run_of, first, sizes, wanted) -> np.ndarray:
+    """Per run (only the ``wanted`` ones; others inf): 1.4826 x the median absolute
+    difference of its readings from their local levels (one sort of those runs together,
+    kept apart by an offset)."""
+    out = np.full(sizes.size, np.inf)
+    n = sizes[wanted]
+    start = np.cumsum(np.r_[0, n[:-1]])
+    i = np.arange(n.sum()) + np.repeat(first[wanted] - start, n)     # the runs' samples
+    d = np.abs(col[i] - _local(col, _neighbours(run_of, first, sizes, NEAR, i)))
+    d = np.where(np.isfinite(d), d, 0.0)
+    offset = run_of[i] * (d.max() + 1.0)
+    v = np.sort(d + offset) - offset          # runs in order: each keeps its place
+    out[wanted] = 1.4826 * 0.5 * (v[start + (n - 1) // 2] + v[start + n // 2])
+    return out
 
 
 def _local(xo: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
     """(N, ...) the median of each sample's four neighbours (sum less the extremes)."""
     v = xo[neighbours]                                   # (4, N, ...)
     return 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0))
-
-
-def _scales(d: np.ndarray, run_of, first, sizes) -> np.ndarray:
-    """Per run: 1.4826 x the median of ``d`` (absolute differences from the local level)
-    over the run (one sort of all runs together, kept apart by an offset)."""
-    d = np.where(np.isfinite(d), d, 0.0)
-    offset = run_of * (d.max() + 1.0)
-    v = np.sort(d + offset) - offset          # run_of is sorted: groups stay in place
-    return 1.4826 * 0.5 * (v[first + (sizes - 1) // 2] + v[first + sizes // 2])
 
 
 def repair_episodes(rec):
