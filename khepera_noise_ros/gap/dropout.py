@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+import weakref
 
 import numpy as np
 
+from . import replay
 from .blocks import Key
 
 ENDS = ('to the lowest reading', 'to the highest reading')
@@ -41,15 +43,16 @@ def hits(x: np.ndarray, runs: list) -> np.ndarray:
     return repair(x, runs)[1]
 
 
-def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray]:
+def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(``x`` with each dropout read as a neighbour's level (the lower of the middle two
-    of its four neighbours: a reading the sensor gave), ``hits``).  The statistics of
-    level, spread and the rest see the repaired readings: a lost sample is counted once,
-    as a dropout, not again as a burst of noise in one cell."""
+    of its four neighbours: a reading the sensor gave), ``hits``, (C, 2) each channel's
+    lowest and highest value).  Everything but the dropout statistics sees the repaired
+    readings: a lost sample is counted once, as a dropout, not again as a burst of noise
+    in one cell, a fall in a run's mean or a jump in its first differences."""
     out = np.zeros(x.shape + (2,), np.float32)
     runs = [r for r in runs if r.size >= 3]
     if not runs or x.size == 0:
-        return x, out
+        return x, out, np.full((x.shape[1], 2), np.nan)
     order = np.concatenate(runs)
     sizes = np.array([r.size for r in runs])
     first = np.cumsum(np.r_[0, sizes[:-1]])
@@ -94,7 +97,48 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray]:
                 repaired = x.copy()
             # read as the lower middle of the neighbours left: a reading the sensor gave
             repaired[order[i[far]], k] = lower[far]
-    return repaired, out
+    return repaired, out, np.stack(ends, axis=1)
+
+
+# Recordings repaired by ``prepared``: id(readings) -> (marks, ends), dropped with them
+_KNOWN: dict = {}
+
+
+def prepared(rec):
+    """``rec`` with its dropouts repaired (a copy; ``rec`` itself when it has none or was
+    prepared already); the marks and extremes are remembered for the statistics and the
+    fit (``known``) as long as the readings live.  Runs: a stationary recording's runs
+    at one heading, a closed-loop recording's episodes."""
+    if id(rec.readings) in _KNOWN:
+        return rec
+    if replay.kind(rec) == 'closed_loop':
+        _, ep = np.unique(rec.episode, return_inverse=True)
+        order = np.lexsort((rec.step, ep))
+        runs = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+    else:
+        runs = replay.runs(rec)
+    repaired, marks, ends = repair(rec.readings, runs)
+    if repaired is not rec.readings:
+        rec = dataclasses.replace(rec, readings=repaired)
+    key = id(rec.readings)
+    _KNOWN[key] = (marks, ends)
+    weakref.finalize(rec.readings, _KNOWN.pop, key, None)
+    return rec
+
+
+def known(readings: np.ndarray):
+    """(marks (N, C, 2), ends (C, 2)) of readings ``prepared`` made, else None."""
+    return _KNOWN.get(id(readings))
+
+
+def columns(readings: np.ndarray, channels, runs: list) -> tuple[np.ndarray, np.ndarray]:
+    """(readings of ``channels`` as float, repaired, and their dropout marks): those
+    ``prepared`` remembered, else found now."""
+    x = readings[:, list(channels)].astype(np.float64)
+    done = known(readings)
+    if done is not None:
+        return x, done[0][:, list(channels)]
+    return repair(x, runs)[:2]
 
 
 def _neighbours(run_of, first, sizes, offsets=NEAR, at=None) -> np.ndarray:
@@ -144,16 +188,20 @@ def repair_episodes(rec):
     (episodes, 8, 2) counts of ``hits``}), episodes in ``np.unique`` order (the
     closed-loop blocks)."""
     episodes, ep = np.unique(rec.episode, return_inverse=True)
-    order = np.lexsort((rec.step, ep))
-    runs = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
-    raw = rec.readings[:, :8]
-    readings, marks = repair(raw, runs)
+    done = known(rec.readings)
+    if done is None:
+        order = np.lexsort((rec.step, ep))
+        runs = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+        raw = rec.readings[:, :8]
+        readings, marks, _ = repair(raw, runs)
+        if readings is not raw:
+            full = rec.readings.copy()
+            full[:, :8] = readings
+            rec = dataclasses.replace(rec, readings=full)
+    else:
+        marks = done[0][:, :8]
     out = np.zeros((episodes.size, 8, 2))
     np.add.at(out, ep, marks)
-    if readings is not raw:
-        full = rec.readings.copy()
-        full[:, :8] = readings
-        rec = dataclasses.replace(rec, readings=full)
     return rec, {'dropped': out}
 
 

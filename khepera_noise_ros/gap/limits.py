@@ -13,7 +13,7 @@ from collections import Counter
 
 import numpy as np
 
-from . import dropout, replay
+from . import dropout
 
 Z = 4.0
 MIN_HITS = 3
@@ -21,12 +21,15 @@ MAX_RATE = 0.5
 
 
 def _counts(rec, sensors) -> tuple[np.ndarray, np.ndarray, list]:
-    """(hits (C, 2), readings (C,), values [(low, high)] per sensor) of one recording."""
-    x = rec.readings[:, sensors].astype(np.float64)
-    marks = dropout.hits(x, replay.runs(rec))
-    with np.errstate(invalid='ignore'):
-        values = list(zip(np.nanmin(x, axis=0), np.nanmax(x, axis=0)))
-    return marks.sum(axis=0), np.isfinite(x).sum(axis=0).astype(np.float64), values
+    """(hits (C, 2), readings (C,), values [(low, high)] per sensor) of one recording
+    (its dropouts as ``dropout.prepared`` found them)."""
+    done = dropout.known(rec.readings)
+    if done is None:
+        rec = dropout.prepared(rec)
+        done = dropout.known(rec.readings)
+    marks, ends = done
+    counted = np.isfinite(rec.readings[:, sensors]).sum(axis=0).astype(np.float64)
+    return marks[:, sensors].sum(axis=0), counted, [tuple(ends[s]) for s in sensors]
 
 
 def dropouts(real: list, sim: list) -> dict:

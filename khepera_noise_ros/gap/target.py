@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..recording import Recording
-from . import replay, statistics
+from . import dropout, replay, statistics
 from .simconfig import SimConfig
 from .statistics import Stats
 from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, standard_error
@@ -44,6 +44,9 @@ class Target:
     kinds: list[str] = field(init=False)
 
     def __post_init__(self):
+        # dropouts repaired once, remembered for their own statistics and fit: every
+        # other statistic and fitter sees the repaired readings (``gap.dropout``)
+        self.recordings = [dropout.prepared(r) for r in self.recordings]
         if self.copies is None:       # enough simulated samples, not more: fits cost less
             n = sum(len(r) for r in self.recordings)
             self.copies = int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
@@ -61,9 +64,10 @@ class Target:
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
-        return [replay.replay(self.recordings[i], self.config, effects,
-                              seed=self.seed + 7919 * i, replicates=copies, base=self.base)
-                for i in self._chosen(kinds)]
+        out = [replay.replay(self.recordings[i], self.config, effects,
+                             seed=self.seed + 7919 * i, replicates=copies, base=self.base)
+               for i in self._chosen(kinds)]
+        return [dropout.prepared(r) for r in out]
 
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]
