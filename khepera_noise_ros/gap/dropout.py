@@ -32,7 +32,7 @@ AWAY = 10.0          # readings: a dropout lies at least this far from the local
 SPREADS = 6.0        # ... and this many robust sds of the run (a normal tail: ~2e-9)
 NEAR = (-2, -1, 1, 2)    # the neighbours whose median is the local level
 STEADY = 2.0         # ... and this many times the largest change among the neighbours
-ISOLATED = 3         # of the four neighbours, at most one is at an extreme too
+ISOLATED = 3         # of the four neighbours, at most one is at the same extreme
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
 
@@ -72,10 +72,10 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarra
     for k in np.flatnonzero(candidate.any(axis=0)):
         i = rows[candidate[:, k]]
         col = xo[:, k]
-        # neighbours at an extreme themselves (a second dropout next to this one) are
-        # left out of the local level and of the neighbours' changes
+        # neighbours at the same extreme (a second dropout next to this one) are left
+        # out of the local level and of the neighbours' changes
         around = col[_neighbours(run_of, first, sizes, NEAR, i)]    # (4, candidates)
-        around = np.where((around == ends[0][k]) | (around == ends[1][k]), np.nan, around)
+        around = np.where(around == col[i][None, :], np.nan, around)
         count = np.isfinite(around).sum(axis=0)
         level, lower = _middle(around)
         d = np.abs(col[i] - level)
