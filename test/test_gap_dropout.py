@@ -16,6 +16,9 @@ from khepera_noise_ros.gap.target import Target
 from test_gap_support import CONFIG, closed_loop_protocol, recorded, stationary_protocol
 
 OPTIONS = diagnose.Options(config=CONFIG, replicates=40)
+# beside an effect that dominates the discrepancy the dropout's step is judged by the
+# paired bootstrap on what is left: the default number of replicates
+BESIDE = diagnose.Options(config=CONFIG)
 ALL = tuple(range(8))
 
 
@@ -142,11 +145,14 @@ def test_dropouts_to_the_top_of_the_range_are_found_at_their_rate():
     assert result.top_effect == 'saturation_quantization'
     p = saturation(result)['parameters']
     assert p['dropout_value'] == 525.0
-    # dropouts in dark runs (readings near 525) cannot be seen; the rate is not biased
-    assert p['dropout'] == pytest.approx(0.01, abs=0.003)
+    # dropouts in dark runs (readings near 525) cannot be seen, on either side: the rate
+    # is scaled by the share the simulator sees (about half here; ~15 seen in the fit
+    # part, so the rate is known to about 30%)
+    assert p['dropout'] == pytest.approx(0.01, abs=0.004)
 
 
 @pytest.mark.parametrize('other', [
+    fx.SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0)),
     fx.IntensityDependentNoise(ALL, 0.04, 2.0),
     fx.CorrelatedNoise(((1, 2, 3),), 0.02),
     fx.TemporalDrift(ALL, 0.012, 30.0, True),
@@ -155,14 +161,14 @@ def test_dropouts_to_the_top_of_the_range_are_found_at_their_rate():
 def test_dropouts_beside_another_effect_are_both_in_the_chosen_set(other):
     real = drop(stationary([other]), ALL if other.name != 'sensor_latency' else (1, 4, 6),
                 0.01, 0.0)
-    result = diagnose.diagnose([real], OPTIONS)
+    result = diagnose.diagnose([real], BESIDE)
     assert other.name in chosen(result), chosen(result)
     assert dropout_in_set(result), chosen(result)
 
 
 def test_closed_loop_dropouts_beside_a_turn_error_are_both_in_the_chosen_set():
     real = drop(closed([fx.ActuatorTurnError(0.7, 0.1)]), ALL, 0.01, 0.0)
-    result = diagnose.diagnose([real], OPTIONS)
+    result = diagnose.diagnose([real], BESIDE)
     assert 'actuator_turn_error' in chosen(result)
     assert dropout_in_set(result), chosen(result)
     assert any(w['statistic'] == 'closed_loop_dropout' and w['significant']
@@ -170,8 +176,8 @@ def test_closed_loop_dropouts_beside_a_turn_error_are_both_in_the_chosen_set():
 
 
 def test_dropouts_in_both_protocols_are_named_not_taken_for_a_turn_error():
-    real = [drop(stationary(), (1, 4, 6), 0.01, 0.0), drop(closed(), (1, 4, 6), 0.01, 0.0,
-                                                             seed=12)]
+    real = [drop(stationary(), (1, 4, 6), 0.01, 0.0),
+            drop(closed(), (1, 4, 6), 0.01, 0.0, seed=12)]
     result = diagnose.diagnose(real, OPTIONS)
     assert result.top_effect == 'saturation_quantization', result.effects[:2]
     assert chosen(result) == ['saturation_quantization']
@@ -181,7 +187,8 @@ def test_dropouts_in_both_protocols_are_named_not_taken_for_a_turn_error():
     lambda: [stationary()], lambda: [closed()],
     lambda: [stationary([fx.SaturationQuantization(ALL, 0.0, 500.0)])],
     lambda: [stationary([fx.SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0))])],
-], ids=['clean', 'clean closed loop', 'ceiling at 500', 'gain and offset'])
+    lambda: [stationary([fx.SensorLatency((0, 1, 2, 3), 1)])],
+], ids=['clean', 'clean closed loop', 'ceiling at 500', 'gain and offset', 'latency'])
 def test_recordings_without_dropouts_get_none(make):
     result = diagnose.diagnose(make(), OPTIONS)
     assert saturation(result)['parameters'].get('dropout', 0.0) == 0.0

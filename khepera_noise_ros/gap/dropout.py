@@ -24,14 +24,13 @@ import weakref
 
 import numpy as np
 
-from . import replay
 from .blocks import Key
 
 ENDS = ('to the lowest reading', 'to the highest reading')
 AWAY = 10.0          # readings: a dropout lies at least this far from the local level
 SPREADS = 6.0        # ... and this many robust sds of the run (a normal tail: ~2e-9)
 NEAR = (-2, -1, 1, 2)    # the neighbours whose median is the local level
-STEADY = 2.0         # ... and this many times the largest change among the neighbours
+STEADY = 2.0         # ... and this many times the range of the neighbours
 ISOLATED = 3         # of the four neighbours, at most one is at the same extreme
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
@@ -79,10 +78,11 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarra
         count = np.isfinite(around).sum(axis=0)
         level, lower = _middle(around)
         d = np.abs(col[i] - level)
-        # a light that sweeps past moves the neighbours too: the jump must stand
-        # ``STEADY`` times above the neighbours' own changes
-        steps = np.abs(np.diff(around, axis=0))
-        rough = np.max(np.where(np.isfinite(steps), steps, 0.0), axis=0)
+        # a light that sweeps past, or a heading change, moves the neighbours too: the
+        # jump must stand ``STEADY`` times above the range of the neighbours left
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)    # none left: not isolated
+            rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
         with np.errstate(invalid='ignore'):
             far = (count >= ISOLATED) & (d >= AWAY) & (d >= STEADY * rough)
         if not far.any():
@@ -107,17 +107,10 @@ _KNOWN: dict = {}
 def prepared(rec):
     """``rec`` with its dropouts repaired (a copy; ``rec`` itself when it has none or was
     prepared already); the marks and extremes are remembered for the statistics and the
-    fit (``known``) as long as the readings live.  Runs: a stationary recording's runs
-    at one heading, a closed-loop recording's episodes."""
+    fit (``known``) as long as the readings live."""
     if id(rec.readings) in _KNOWN:
         return rec
-    if replay.kind(rec) == 'closed_loop':
-        _, ep = np.unique(rec.episode, return_inverse=True)
-        order = np.lexsort((rec.step, ep))
-        runs = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
-    else:
-        runs = replay.runs(rec)
-    repaired, marks, ends = repair(rec.readings, runs)
+    repaired, marks, ends = repair(rec.readings, episodes(rec))
     if repaired is not rec.readings:
         rec = dataclasses.replace(rec, readings=repaired)
     key = id(rec.readings)
@@ -131,14 +124,23 @@ def known(readings: np.ndarray):
     return _KNOWN.get(id(readings))
 
 
-def columns(readings: np.ndarray, channels, runs: list) -> tuple[np.ndarray, np.ndarray]:
+def episodes(rec) -> list:
+    """Sample indices of each episode in step order: the runs a dropout is judged in.  A
+    stationary episode is one continuous run through its headings, so a reading that
+    lags a heading change (a latency) sits between its neighbours' levels, not apart."""
+    _, ep = np.unique(rec.episode, return_inverse=True)
+    order = np.lexsort((rec.step, ep))
+    return np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+
+
+def columns(rec, channels) -> tuple[np.ndarray, np.ndarray]:
     """(readings of ``channels`` as float, repaired, and their dropout marks): those
     ``prepared`` remembered, else found now."""
-    x = readings[:, list(channels)].astype(np.float64)
-    done = known(readings)
+    x = rec.readings[:, list(channels)].astype(np.float64)
+    done = known(rec.readings)
     if done is not None:
         return x, done[0][:, list(channels)]
-    return repair(x, runs)[:2]
+    return repair(x, episodes(rec))[:2]
 
 
 def _neighbours(run_of, first, sizes, offsets=NEAR, at=None) -> np.ndarray:
@@ -187,20 +189,18 @@ def repair_episodes(rec):
     """(``rec`` with its closed-loop dropouts repaired (see ``repair``), {'dropped':
     (episodes, 8, 2) counts of ``hits``}), episodes in ``np.unique`` order (the
     closed-loop blocks)."""
-    episodes, ep = np.unique(rec.episode, return_inverse=True)
+    labels, ep = np.unique(rec.episode, return_inverse=True)
     done = known(rec.readings)
     if done is None:
-        order = np.lexsort((rec.step, ep))
-        runs = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
         raw = rec.readings[:, :8]
-        readings, marks, _ = repair(raw, runs)
+        readings, marks, _ = repair(raw, episodes(rec))
         if readings is not raw:
             full = rec.readings.copy()
             full[:, :8] = readings
             rec = dataclasses.replace(rec, readings=full)
     else:
         marks = done[0][:, :8]
-    out = np.zeros((episodes.size, 8, 2))
+    out = np.zeros((labels.size, 8, 2))
     np.add.at(out, ep, marks)
     return rec, {'dropped': out}
 

@@ -119,7 +119,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     lay = _layout(rec, length)
     labels, cell, runs = lay['labels'], lay['cell'], lay['runs']
     order, block, nb = lay['order'], lay['block'], lay['nb']
-    x, dropped = dropout.columns(rec.readings, channels, runs)    # dropouts: on their own
+    x, dropped = dropout.columns(rec, channels)     # dropouts counted on their own
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
     run_order, run_starts, run_sizes = lay['run_at']
