@@ -32,6 +32,7 @@ SPREADS = 6.0        # ... and this many robust sds of the run (a normal tail: ~
 NEAR = (-2, -1, 1, 2)    # the neighbours whose median is the local level
 STEADY = 2.0         # ... and this many times the range of the neighbours
 ISOLATED = 3         # of the four neighbours, at most one is at the same extreme
+STRETCHED = 0.25     # a value whose readings lie next to each other this often is a limit
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
 
@@ -63,7 +64,7 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarra
             ends = (np.nanmin(xo, axis=0), np.nanmax(xo, axis=0))
     else:
         ends = (xo.min(axis=0), xo.max(axis=0))
-    at = [xo == v[None, :] for v in ends]
+    at = [_isolated(xo == v[None, :], run_of) for v in ends]
     rows = np.flatnonzero((at[0] | at[1]).any(axis=1))      # few: the extremes
     near = np.abs(xo[rows] - _local(xo, _neighbours(run_of, first, sizes, NEAR, rows))) >= AWAY
     candidate = (at[0][rows] | at[1][rows]) & near
@@ -141,6 +142,22 @@ def columns(rec, channels) -> tuple[np.ndarray, np.ndarray]:
     if done is not None:
         return x, done[0][:, list(channels)]
     return repair(x, episodes(rec))[:2]
+
+
+def _isolated(at: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+    """``at`` (N, C), cleared for the channels whose readings at the value come in
+    stretches: more than ``STRETCHED`` of them next to another one in the same run.  The
+    light itself holds a sensor at a limit (a lamp saturating it) for stretches, and a
+    single step's visit there is then no dropout; dropouts at a rate p lie next to each
+    other about 2p of the time."""
+    same = (run_of[1:] == run_of[:-1])[:, None]
+    pair = at[1:] & at[:-1] & same
+    beside = np.zeros_like(at)
+    beside[1:] |= pair
+    beside[:-1] |= pair
+    with np.errstate(invalid='ignore', divide='ignore'):
+        stretched = beside.sum(axis=0) > STRETCHED * at.sum(axis=0)
+    return at & ~stretched[None, :]
 
 
 def _neighbours(run_of, first, sizes, offsets=NEAR, at=None) -> np.ndarray:
