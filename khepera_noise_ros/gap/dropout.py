@@ -4,17 +4,20 @@ A dropout is a lost sample: the converter reads zero, or the top of its scale, f
 one step, whatever the light.  Its fingerprint is a reading at the sensor's extreme
 value (its lowest or highest over the recording: 0 or the scale's top once it has
 dropouts, whatever the scale) lying far from the *local* level, the median of the two
-readings before and the two after it in the same run: by ``AWAY`` readings and by
-``SPREADS`` robust sds of the run's readings about that local level.  The local level
-follows a slow drift and a closed-loop robot's turns; the robust sd grows with a
-spread law or a group's shared noise beside it; a gain moves a run's level, not its
-single readings.  A floor or ceiling clips whole stretches of a run, so its readings
-at the extreme lie next to others at it (not far), and are not dropouts.
+readings before and the two after it in the same episode: by ``AWAY`` readings, by
+``SPREADS`` robust sds of the episode's readings about their local levels, and by
+``STEADY`` times the range of those neighbours.  The local level follows a slow drift,
+a heading change and a closed-loop robot's turns; the robust sd grows with a spread
+law or a group's shared noise beside it; a gain moves a run's level, not its single
+readings.  A floor or ceiling, or a lamp's saturation, holds readings at the extreme
+for stretches: such a value is a limit, not a dropout value.
 
-``hits`` marks them per sample; the gap statistics compare their share per sensor and
-end (family ``dropout`` for stationary runs, ``closed_loop_dropout`` for closed-loop
-episodes) and see the other statistics on readings with them repaired (``repair``);
-``gap.limits`` counts them to fit ``saturation_quantization``'s dropout.
+``repair`` marks them and reads each as its neighbours' level; ``prepared`` does so once
+per recording (``Target`` and its simulations) and remembers the marks.  The gap
+statistics compare their share per sensor and end (family ``dropout`` for stationary
+recordings, ``closed_loop_dropout`` for closed-loop ones) and see everything else on
+the repaired readings; ``gap.limits`` counts them to fit ``saturation_quantization``'s
+dropout.
 """
 from __future__ import annotations
 
