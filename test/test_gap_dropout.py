@@ -151,9 +151,9 @@ def test_dropouts_to_the_top_of_the_range_are_found_at_their_rate():
     p = saturation(result)['parameters']
     assert p['dropout_value'] == 525.0
     # dropouts in dark runs (readings near 525) cannot be seen, on either side: the rate
-    # is scaled by the share the simulator sees (about half here; ~15 seen in the fit
-    # part, so the rate is known to about 30%)
-    assert p['dropout'] == pytest.approx(0.01, abs=0.004)
+    # is scaled by the share the simulator sees (about 40% here, so 0.4% is seen; ~15
+    # seen in the fit part, so the rate is known to about 30%)
+    assert 0.005 <= p['dropout'] <= 0.015
 
 
 @pytest.mark.parametrize('other', [

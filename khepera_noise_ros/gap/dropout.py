@@ -36,6 +36,8 @@ NEAR = (-2, -1, 1, 2)    # the neighbours whose median is the local level
 STEADY = 2.0         # ... and this many times the range of the neighbours
 ISOLATED = 3         # of the four neighbours, at most one is at the same extreme
 STRETCHED = 0.25     # a value whose readings lie next to each other this often is a limit
+WINDOW = tuple(k for k in range(-8, 9) if k)   # a quick sd from these neighbours ...
+QUICK = 0.75         # ... rules out, with a margin, readings the run's sd would (cheaper)
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
 
@@ -51,58 +53,86 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarra
     of its four neighbours: a reading the sensor gave), ``hits``, (C, 2) each channel's
     lowest and highest value).  Everything but the dropout statistics sees the repaired
     readings: a lost sample is counted once, as a dropout, not again as a burst of noise
-    in one cell, a fall in a run's mean or a jump in its first differences."""
+    in one cell, a fall in a run's mean or a jump in its first differences.  Only the
+    readings at an extreme are looked at (most recordings have few)."""
     out = np.zeros(x.shape + (2,), np.float32)
     runs = [r for r in runs if r.size >= 3]
     if not runs or x.size == 0:
         return x, out, np.full((x.shape[1], 2), np.nan)
+    if np.isnan(x).any():
+        with np.errstate(invalid='ignore'), warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)     # a channel all NaN
+            ends = np.stack([np.nanmin(x, axis=0), np.nanmax(x, axis=0)], axis=1)
+    else:
+        ends = np.stack([x.min(axis=0), x.max(axis=0)], axis=1)
     order = np.concatenate(runs)
     sizes = np.array([r.size for r in runs])
     first = np.cumsum(np.r_[0, sizes[:-1]])
     run_of = np.repeat(np.arange(len(runs)), sizes)
-    xo = x[order].astype(np.float64)
-    if np.isnan(xo).any():
-        with np.errstate(invalid='ignore'), warnings.catch_warnings():
-            warnings.simplefilter('ignore', RuntimeWarning)     # a channel all NaN
-            ends = (np.nanmin(xo, axis=0), np.nanmax(xo, axis=0))
-    else:
-        ends = (xo.min(axis=0), xo.max(axis=0))
-    at = [_isolated(xo == v[None, :], run_of) for v in ends]
-    rows = np.flatnonzero((at[0] | at[1]).any(axis=1))      # few: the extremes
-    near = np.abs(xo[rows] - _local(xo, _neighbours(run_of, first, sizes, NEAR, rows))) >= AWAY
-    candidate = (at[0][rows] | at[1][rows]) & near
+    place = np.full(x.shape[0], -1)
+    place[order] = np.arange(order.size)            # sample -> position, run by run
     repaired = x
-    for k in np.flatnonzero(candidate.any(axis=0)):
-        i = rows[candidate[:, k]]
-        col = xo[:, k]
-        # neighbours at the same extreme (a second dropout next to this one) are left
-        # out of the local level and of the neighbours' changes
-        around = col[_neighbours(run_of, first, sizes, NEAR, i)]    # (4, candidates)
-        around = np.where(around == col[i][None, :], np.nan, around)
-        count = np.isfinite(around).sum(axis=0)
-        level, lower = _middle(around)
-        d = np.abs(col[i] - level)
-        # a light that sweeps past, or a heading change, moves the neighbours too: the
-        # jump must stand ``STEADY`` times above the range of the neighbours left
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore', RuntimeWarning)    # none left: not isolated
-            rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
-        with np.errstate(invalid='ignore'):
-            far = (count >= ISOLATED) & (d >= AWAY) & (d >= STEADY * rough)
-        if not far.any():
-            continue
+    hits = [np.nonzero((x == ends[None, :, end]).T) for end in (0, 1)]   # one pass each
+    for k in range(x.shape[1]):
+        col = None
+        for end in (0, 1):
+            channel, sample = hits[end]
+            i = place[sample[channel == k]]
+            i = np.sort(i[i >= 0])
+            if i.size == 0 or _stretched(i, run_of):
+                continue
+            if col is None:
+                col = x[order, k].astype(np.float64)
+            far, lower = _far(col, i, run_of, first, sizes)
+            out[order[i[far]], k, end] = 1.0
+            if far.any():
+                if repaired is x:
+                    repaired = x.copy()
+                repaired[order[i[far]], k] = lower[far]
+    return repaired, out, ends
+
+
+def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
+    """Do the readings at a value (positions ``i``, sorted) come in stretches: more than
+    ``STRETCHED`` of them next to another one in the same run?  The light itself holds a
+    sensor at a limit (a lamp saturating it) for stretches, and a single step's visit
+    there is then no dropout; dropouts at a rate p lie next to each other about 2p of
+    the time."""
+    pair = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    beside = np.zeros(i.size, bool)
+    beside[1:] |= pair
+    beside[:-1] |= pair
+    return beside.sum() > STRETCHED * i.size
+
+
+def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
+    """(which of the readings at positions ``i`` are isolated and far from their local
+    level, the lower middle of their neighbours)."""
+    # neighbours at the same extreme (a second dropout next to this one) are left out
+    # of the local level and of the neighbours' range
+    around = col[_neighbours(run_of, first, sizes, NEAR, i)]        # (4, candidates)
+    around = np.where(around == col[i][None, :], np.nan, around)
+    count = np.isfinite(around).sum(axis=0)
+    level, lower = _middle(around)
+    d = np.abs(col[i] - level)
+    # a light that sweeps past, or a heading change, moves the neighbours too: the
+    # jump must stand ``STEADY`` times above the range of the neighbours left
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)    # none left: not isolated
+        rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
+    with np.errstate(invalid='ignore'):
+        far = (count >= ISOLATED) & (d >= AWAY) & (d >= STEADY * rough)
+    if far.any():                   # a quick robust sd from the nearby readings first
+        near = col[_neighbours(run_of, first, sizes, WINDOW, i[far])]
+        spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
+        far[far] = d[far] >= QUICK * SPREADS * spread
+    if far.any():
         scale = _scales(col, run_of, first, sizes, np.unique(run_of[i[far]]))
         far &= d >= SPREADS * scale[run_of[i]]
-        for end in (0, 1):
-            mark = i[far & (col[i] == ends[end][k])]
-            out[order[mark], k, end] = 1.0
-        if far.any():
-            if repaired is x:
-                repaired = x.copy()
-            # read as the lower middle of the neighbours left: a reading the sensor gave
-            repaired[order[i[far]], k] = lower[far]
-    return repaired, out, np.stack(ends, axis=1)
+    return far, lower
 
+
+_EPISODES: dict = {}
 
 # Recordings repaired by ``prepared``: id(readings) -> (marks, ends), dropped with them
 _KNOWN: dict = {}
@@ -132,9 +162,17 @@ def episodes(rec) -> list:
     """Sample indices of each episode in step order: the runs a dropout is judged in.  A
     stationary episode is one continuous run through its headings, so a reading that
     lags a heading change (a latency) sits between its neighbours' levels, not apart."""
+    key = (id(rec.episode), id(rec.step))
+    hit = _EPISODES.get(key)         # replays of a protocol share its index columns
+    if hit is not None and hit[0] is rec.episode and hit[1] is rec.step:
+        return hit[2]
     _, ep = np.unique(rec.episode, return_inverse=True)
     order = np.lexsort((rec.step, ep))
-    return np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+    out = np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+    _EPISODES[key] = (rec.episode, rec.step, out)
+    if len(_EPISODES) > 32:
+        _EPISODES.pop(next(iter(_EPISODES)))
+    return out
 
 
 def columns(rec, channels) -> tuple[np.ndarray, np.ndarray]:
@@ -145,22 +183,6 @@ def columns(rec, channels) -> tuple[np.ndarray, np.ndarray]:
     if done is not None:
         return x, done[0][:, list(channels)]
     return repair(x, episodes(rec))[:2]
-
-
-def _isolated(at: np.ndarray, run_of: np.ndarray) -> np.ndarray:
-    """``at`` (N, C), cleared for the channels whose readings at the value come in
-    stretches: more than ``STRETCHED`` of them next to another one in the same run.  The
-    light itself holds a sensor at a limit (a lamp saturating it) for stretches, and a
-    single step's visit there is then no dropout; dropouts at a rate p lie next to each
-    other about 2p of the time."""
-    same = (run_of[1:] == run_of[:-1])[:, None]
-    pair = at[1:] & at[:-1] & same
-    beside = np.zeros_like(at)
-    beside[1:] |= pair
-    beside[:-1] |= pair
-    with np.errstate(invalid='ignore', divide='ignore'):
-        stretched = beside.sum(axis=0) > STRETCHED * at.sum(axis=0)
-    return at & ~stretched[None, :]
 
 
 def _neighbours(run_of, first, sizes, offsets=NEAR, at=None) -> np.ndarray:
