@@ -80,21 +80,33 @@ def test_isolated_extremes_are_marked_and_repaired_and_nothing_else():
     assert np.all(np.abs(repaired[hit, 0] - 400) < 60)
 
 
-def test_a_ceiling_a_sweeping_light_and_a_visit_to_the_lamps_limit_are_not_dropouts():
+def test_a_ceiling_and_a_sweeping_light_are_not_dropouts():
     rng = np.random.default_rng(4)
     noise = np.round(400 + 8 * rng.standard_normal((6000, 3)))
     ceiling = np.minimum(noise, 405.0)                    # a limit: a pile, not isolated
     t = np.arange(6000) % 300
     sweep = np.round(np.clip(500 - 500 * np.exp(-0.5 * ((t - 150) / 3.0) ** 2)
                              + 3 * rng.standard_normal(6000), 50, 525))   # a lamp passes
-    # a lamp that holds the sensor at its saturation (50) for whole runs, and that a
-    # quick turn points at for a single step elsewhere: a limit the light reaches
+    x = np.stack([ceiling[:, 0], sweep, noise[:, 2]], axis=1)
+    assert (x[:, 1] == 50).sum() > 20
+    for moving in (False, True):
+        assert dropout.hits(x, _runs(6000, 300), moving).sum() == 0
+
+
+def test_a_limit_the_light_reaches_is_a_dropout_value_only_where_the_light_is_steady():
+    """A lamp holds the sensor at its saturation (50) for whole runs; elsewhere single
+    readings read 50.  While the light moves (closed loop) a quick turn can point the
+    sensor at the lamp for one step: not a dropout.  In a stationary run the light is
+    steady: a lone 50 in a run at 150 is one."""
+    rng = np.random.default_rng(5)
     visit = np.round(150 + 3 * rng.standard_normal(6000))
     visit[:1500] = 50.0
-    visit[np.arange(1650, 6000, 300)] = 50.0
-    x = np.stack([ceiling[:, 0], sweep, visit], axis=1)
-    assert (x[:, 1] == 50).sum() > 20
-    assert dropout.hits(x, _runs(6000, 300)).sum() == 0
+    lone = np.arange(1650, 6000, 300)
+    visit[lone] = 50.0
+    x = visit[:, None]
+    assert dropout.hits(x, _runs(6000, 300), moving=True).sum() == 0
+    marks = dropout.hits(x, _runs(6000, 300), moving=False)
+    assert np.array_equal(np.flatnonzero(marks[:, 0, 0]), lone)
 
 
 def test_dropout_statistics_see_the_dropouts_and_the_others_do_not():

@@ -27,6 +27,7 @@ import weakref
 
 import numpy as np
 
+from . import replay
 from .blocks import Key
 
 ENDS = ('to the lowest reading', 'to the highest reading')
@@ -41,20 +42,24 @@ QUICK = 0.75         # ... rules out, with a margin, readings the run's sd would
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
 
 
-def hits(x: np.ndarray, runs: list) -> np.ndarray:
+def hits(x: np.ndarray, runs: list, moving: bool = False) -> np.ndarray:
     """(N, C, 2) float32: 1 where sample t of channel k is an isolated reading at the
     channel's lowest (end 0) or highest (end 1) finite value; ``runs``: sample indices
     of each run in step order (runs shorter than 3 samples have no neighbours)."""
-    return repair(x, runs)[1]
+    return repair(x, runs, moving)[1]
 
 
-def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def repair(x: np.ndarray, runs: list,
+           moving: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(``x`` with each dropout read as a neighbour's level (the lower of the middle two
     of its four neighbours: a reading the sensor gave), ``hits``, (C, 2) each channel's
     lowest and highest value).  Everything but the dropout statistics sees the repaired
     readings: a lost sample is counted once, as a dropout, not again as a burst of noise
     in one cell, a fall in a run's mean or a jump in its first differences.  Only the
-    readings at an extreme are looked at (most recordings have few)."""
+    readings at an extreme are looked at (most recordings have few).  ``moving``: the
+    light moves within a run (closed loop), so a value held for stretches is a limit the
+    light reaches (``_stretched``); in a stationary run the light is steady and a lone
+    reading far from it is a dropout whatever the value."""
     out = np.zeros(x.shape + (2,), np.float32)
     runs = [r for r in runs if r.size >= 3]
     if not runs or x.size == 0:
@@ -79,7 +84,7 @@ def repair(x: np.ndarray, runs: list) -> tuple[np.ndarray, np.ndarray, np.ndarra
             channel, sample = hits[end]
             i = place[sample[channel == k]]
             i = np.sort(i[i >= 0])
-            if i.size == 0 or _stretched(i, run_of):
+            if i.size == 0 or (moving and _stretched(i, run_of)):
                 continue
             if col is None:
                 col = x[order, k].astype(np.float64)
@@ -144,7 +149,8 @@ def prepared(rec):
     fit (``known``) as long as the readings live."""
     if id(rec.readings) in _KNOWN:
         return rec
-    repaired, marks, ends = repair(rec.readings, episodes(rec))
+    repaired, marks, ends = repair(rec.readings, episodes(rec),
+                                   replay.kind(rec) == 'closed_loop')
     if repaired is not rec.readings:
         rec = dataclasses.replace(rec, readings=repaired)
     key = id(rec.readings)
@@ -235,7 +241,7 @@ def repair_episodes(rec):
     done = known(rec.readings)
     if done is None:
         raw = rec.readings[:, :8]
-        readings, marks, _ = repair(raw, episodes(rec))
+        readings, marks, _ = repair(raw, episodes(rec), moving=True)
         if readings is not raw:
             full = rec.readings.copy()
             full[:, :8] = readings
