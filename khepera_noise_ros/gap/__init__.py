@@ -15,7 +15,8 @@ effect explains it, and how far adding that effect shrinks the gap on held-out d
   fitturn     fitting the turn error: scale, random slip, creep
   fitbase     what the fitters share (Candidate, detection threshold, golden search)
   spreadlaw   laws of the noise's spread against the level
-  limits      dropouts: isolated readings stuck at zero or a limit
+  dropout     isolated readings at a sensor's extremes: marked, repaired, their statistics
+  limits      dropouts counted against the simulator, for the fit
   compound    forward selection of a set of effects, each fitted jointly
   remainder   what the named effects leave, and its empirical model
   groups      dependence groups by clustering correlations

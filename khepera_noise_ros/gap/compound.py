@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import effects as fx
-from . import closednoise, fit
+from . import closednoise, dropout, fit
 from .target import Target
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
@@ -185,7 +185,7 @@ def _local_gains(before, current, after) -> tuple:
     the chosen effects leave a small remainder, an effect that explains much of that
     remainder is still a small share of the gap before any effect."""
     before_any = left = 0.0
-    for part in ('stationary', 'closed_loop', 'closed_loop_noise'):
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
             before_any = max(before_any, (d1 - d2) / d0)
@@ -203,6 +203,8 @@ def _part(c, part: str) -> float:
 
 
 def _protocol(family: str) -> str:
+    if family in dropout.FAMILIES:     # only a dropout moves them: they count on their own
+        return 'dropout'
     if family in STATIONARY:
         return 'stationary'
     return 'closed_loop_noise' if family in closednoise.FAMILIES else 'closed_loop'

@@ -96,8 +96,7 @@ def saturation(target: Target, c: Comparison) -> Candidate:
         if lattice[0] > 1 and measured:
             grid[sensor] = lattice
     stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
-    lost = limits.dropouts(stationary, target.simulate(kinds=('stationary',)),
-                           reading_range(rec.manifest, rec.channels))
+    lost = limits.dropouts(target.recordings, target.simulate())    # closed loop too
     if not (low or high or grid or lost):
         return Candidate(name, None, 'no readings held at a limit, no coarse value grid and '
                                      'no dropouts')
@@ -108,21 +107,29 @@ def saturation(target: Target, c: Comparison) -> Candidate:
                 'dropout_value': max(set(values), key=values.count)}
     lattices = list(grid.values())
     step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
+    top = max(ANCHOR, *(v for v in reading_range(rec.manifest, rec.channels)
+                        if np.isfinite(v)), *(v for v, _ in lost.values()))
     options = []
     for use_low in ([False, True] if low else [False]):
         for use_high in ([False, True] if high else [False]):
-            sensors = set(grid) | (set(low['sensors']) if use_low else set()) | \
-                (set(high['sensors']) if use_high else set()) | set(lost)
-            if sensors:
-                options.append(fx.SaturationQuantization(
-                    tuple(sorted(sensors)),
-                    low=low['value'] if use_low else 0.0,
-                    high=high['value'] if use_high else ANCHOR,
-                    step=float(step), origin=float(origin), **drop))
+            # with dropouts, a grid is tried without its lattice too: only what is needed
+            for use_grid in ([False, True] if grid and lost else [bool(grid)]):
+                sensors = (set(grid) if use_grid else set()) | set(lost) | \
+                    (set(low['sensors']) if use_low else set()) | \
+                    (set(high['sensors']) if use_high else set())
+                if sensors:
+                    options.append(fx.SaturationQuantization(
+                        tuple(sorted(sensors)),
+                        low=low['value'] if use_low else 0.0,
+                        high=high['value'] if use_high else top,
+                        step=float(step) if use_grid else 1.0,
+                        origin=float(origin) if use_grid else 0.0, **drop))
     kinds = ('stationary',) if stationary else None     # closed loop alone: judge there
     effect = min(options, key=lambda e: target.objective([e], kinds, limits=True))
+    if lost:
+        effect = limits.rescaled(target, effect, sorted(lost))
     what = [w for w, found in ((f'clipped below at {effect.low:g}', effect.low > 0),
-                               (f'clipped above at {effect.high:g}', effect.high < ANCHOR),
+                               (f'clipped above at {effect.high:g}', effect.high < top),
                                ('on a grid', effect.step > 1),
                                (f'dropping out to {effect.dropout_value:g} at rate '
                                 f'{effect.dropout:.2%}', effect.dropout > 0)) if found]

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import sparse
 
 from ..recording import Recording
-from . import blockcounts, blocklength, pileup
+from . import blockcounts, blocklength, dropout, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 
@@ -123,7 +123,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     if 'segments' not in lay:
         lay['segments'] = _segments(lay['block'], nb)
     block = lay['segments']
-    x = rec.readings[:, list(channels)].astype(np.float64)
+    x, dropped = dropout.columns(rec, channels)     # dropouts counted on their own
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
     run_order, run_starts, run_sizes = lay['run_at']
@@ -174,6 +174,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
                                       nb)
         parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
+    parts['dropped'] = _block_sum(block, inorder(dropped), nb)
     parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
     if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
         lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
@@ -388,6 +389,8 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
     total = n.sum(axis=1)[:, None]
     edge = b.part(sums, 'edge').sum(axis=1) / total[..., None]           # (R, C, 2)
     cols.append(edge.reshape(r, -1))
+    dropped = b.part(sums, 'dropped').sum(axis=1) / total[..., None]     # (R, C, 2)
+    cols.append(np.stack([v for _, v in dropout.shares('dropout', ch, None, dropped)], axis=1))
     if b.extra['integer']:
         for c in conditions:
             m = members[c]
@@ -420,6 +423,7 @@ def _stationary_keys(strata: tuple, ch: tuple, timed: tuple | None, integer: boo
         keys += [Key('step_response', (sensor,), None, f'sample {j} after a change')
                  for sensor, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
     keys += [Key('pileup', (sensor,), None, end) for sensor in ch for end in pileup.ENDS]
+    keys += [k for k, _ in dropout.shares('dropout', ch, None, np.zeros((1, len(ch), 2)))]
     if integer:
         keys += [Key('mode_share', (sensor,), c, None) for c in conditions for sensor in ch]
         keys += [Key('granularity', (sensor,), None, f'step {q}') for sensor in ch

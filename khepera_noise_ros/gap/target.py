@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..recording import Recording
-from . import replay, statistics
+from . import dropout, replay, statistics
 from .simconfig import SimConfig
 from .statistics import Stats
 from .where import FLOOR, FLOORS, MARGIN, Z_CAP, Comparison, compare, discrepancy
@@ -27,8 +27,8 @@ SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compa
 SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of copies
 # The pile at a sensor's ends (``gap.pileup``) locates and scores limits; its bootstrap
 # error ignores where an end falls, which a slow change moves, so only a limit is fitted
-# to it.
-LIMITS_ONLY = frozenset({'pileup'})
+# to it.  So are isolated readings at a sensor's extremes (``gap.dropout``).
+LIMITS_ONLY = frozenset({'pileup', 'dropout', 'closed_loop_dropout'})
 
 
 @dataclass
@@ -45,6 +45,9 @@ class Target:
     kinds: list[str] = field(init=False)
 
     def __post_init__(self):
+        # dropouts repaired once, remembered for their own statistics and fit: every
+        # other statistic and fitter sees the repaired readings (``gap.dropout``)
+        self.recordings = [dropout.prepared(r) for r in self.recordings]
         if self.copies is None:       # enough simulated samples, not more: fits cost less
             n = sum(len(r) for r in self.recordings)
             self.copies = int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
@@ -62,8 +65,9 @@ class Target:
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
-        return [_replay(self.recordings[i], self.config, effects, self.seed + 7919 * i, copies,
-                        self.base) for i in self._chosen(kinds)]
+        return [dropout.prepared(_replay(self.recordings[i], self.config, effects,
+                                         self.seed + 7919 * i, copies, self.base))
+                for i in self._chosen(kinds)]
 
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]

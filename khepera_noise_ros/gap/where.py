@@ -25,9 +25,11 @@ MARGIN = 2.0
 Z_CAP = 1e3
 # The least standard error a statistic can have: readings are integers, so a level is
 # not known better than a uniform error of +-0.5 (sd 0.29), even where it never varies.
-# pileup: where a pile is looked for is fixed in the bootstrap, so its error is floored
+# pileup: where a pile is looked for is fixed in the bootstrap, so its error is floored;
+# a dropout share: a count; its bootstrap error is Poisson's, floored at 1 in 10,000
 FLOORS = {'level': 0.3, 'closed_loop_level': 0.3, 'spread': 0.05, 'pileup': 0.004,
-          'turn_size_scatter': 0.03}    # headings in tenths of a degree
+          'turn_size_scatter': 0.03,    # headings in tenths of a degree
+          'dropout': 1e-4, 'closed_loop_dropout': 1e-4}
 FLOOR = 0.002
 
 
