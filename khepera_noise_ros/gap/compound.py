@@ -26,6 +26,7 @@ import numpy as np
 from . import effects as fx
 from . import closednoise, fit
 from .target import Target
+from .where import Z_CAP, discrepancy
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
@@ -34,6 +35,10 @@ STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
 CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step is checked on
+# Discrepancy of one statistic with no gap at all, z ~ N(0, 1): mean and variance of
+# max(|z| - 2, 0)^2 (``where.discrepancy``); what is left of a part is worked on by
+# the MIN_LEFT and family rules only above the chance mean + CHANCE_SDS sds.
+CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
 
 
 @dataclass
@@ -164,7 +169,26 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
     family = _family_gain(b, first_cmp, current_cmp, after)
     counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
                      family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
+    if counts and not _closer(current_cmp, after):
+        counts = ''
     return counts, reps, p, added
+
+
+def _closer(current, after) -> bool:
+    """Does the step bring the simulated statistics closer to the real ones, judged at
+    the error bars before it?  An effect that adds variance between simulated runs (a
+    drift) widens the error bars of the levels, which lowers their z however far off
+    they are; a drift beside a calibration fitted a little off then lowers the held-out
+    discrepancy without matching anything."""
+    index = {k: i for i, k in enumerate(current.keys)}
+    rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
+    if not rows:
+        return True
+    ai, ci = (np.array(r, np.int64) for r in zip(*rows))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        z = (after.real[ai] - after.sim[ai]) / current.se[ci]
+    z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
+    return discrepancy(z) < discrepancy(current.z[ci])
 
 
 def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, current_reps,
@@ -242,9 +266,16 @@ def _local_gains(before, current, after) -> tuple:
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
             before_any = max(before_any, (d1 - d2) / d0)
-        if d1 > 0:
+        if d1 > _chance(sum(_protocol(k.family) == part for k in current.keys)):
             left = max(left, (d1 - d2) / d1)
     return before_any, left
+
+
+def _chance(n: int) -> float:
+    """The discrepancy ``n`` statistics reach by chance with no gap left (mean + 3 sd):
+    once a part's remainder is below it, halving it is fitting the noise (a part with
+    few statistics left at 0.5 halves by chance)."""
+    return n * CHANCE_MEAN + CHANCE_SDS * np.sqrt(n * CHANCE_VAR)
 
 
 def _family_gain(b: Target, before, current, after) -> float:
@@ -257,7 +288,8 @@ def _family_gain(b: Target, before, current, after) -> float:
     best = 0.0
     for fam in sorted({k.family for k in before.keys}):
         d0, d1, d2 = (_family(c, fam) for c in (before, current, after))
-        if d0 <= 0 or d2 >= d1 or (d1 - d2) / d0 < MIN_LOCAL:
+        if d0 <= 0 or d2 >= d1 or (d1 - d2) / d0 < MIN_LOCAL or \
+                d1 <= _chance(sum(k.family == fam for k in current.keys)):
             continue
         p = paired_p(_family_reps(b, current, fam), _family_reps(b, after, fam), d1, d2)
         if p < STEP_ALPHA:
