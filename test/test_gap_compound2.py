@@ -7,6 +7,7 @@ only the recording and the paper's independent model at the robot's noise level.
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
@@ -76,3 +77,32 @@ def test_a_step_counts_by_a_familys_share_only_when_confirmed(family, left, expe
     assert compound._counts(0.01, (0.0, 0.0), 0.01, 90.0, 100.0, lambda: False) == 'min_added'
     assert compound._counts(0.001, (0.2, 0.0), 0.01, 90.0, 100.0, lambda: False) == 'min_local'
     assert compound._counts(0.01, (0.0, 0.0), 0.2, 90.0, 100.0, lambda: False) == ''
+
+
+def test_a_calibration_alone_is_not_padded_with_a_drift():
+    """Three sensors off in gain and offset, nothing else: a per-sensor drift fitted
+    beside the calibration lowered the held-out discrepancy only by widening the
+    simulated levels' error bars (the held-out levels a little off the fitted line)."""
+    config = EffectsConfig.none(0.02).only(
+        'sensor_gain_offset',
+        sensor_gain_offset={'gains': (0.938, 1, 1, 1, 1, 1.155, 0.931, 1),
+                            'offsets': (3.05, 0, 0, 0, 0, 8.88, 7.3, 0),
+                            'location': (0, 5, 6)})
+    chosen = _chosen(config, seed=3)
+    assert [c['name'] for c in chosen] == ['sensor_gain_offset'], chosen
+    assert chosen[0]['sensors'] == [0, 5, 6]
+
+
+def test_closer_judges_a_step_at_the_error_bars_before_it():
+    from khepera_noise_ros.gap.statistics import Key
+    from khepera_noise_ros.gap.where import Comparison
+    keys = [Key('level', (0,), 'task', None), Key('level', (1,), 'task', None)]
+
+    def cmp(sim, se):
+        real, sim, se = np.array([10.0, 5.0]), np.array(sim), np.array(se)
+        return Comparison(keys, real, sim, se, (real - sim) / se)
+    current = cmp([0.0, 5.0], [1.0, 1.0])
+    wider = cmp([0.0, 5.0], [10.0, 1.0])          # the same simulated levels, wider bars
+    assert wider.discrepancy < current.discrepancy
+    assert not compound._closer(current, wider)
+    assert compound._closer(current, cmp([9.0, 5.0], [1.0, 1.0]))
