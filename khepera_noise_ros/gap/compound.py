@@ -176,10 +176,12 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
 
 def _closer(current, after) -> bool:
     """Does the step bring the simulated statistics closer to the real ones, judged at
-    the error bars before it?  An effect that adds variance between simulated runs (a
-    drift) widens the error bars of the levels, which lowers their z however far off
-    they are; a drift beside a calibration fitted a little off then lowers the held-out
-    discrepancy without matching anything."""
+    the error bars before it: all of them, or those other than the levels?  An effect
+    that adds variance between simulated runs (a drift) widens the error bars of the
+    levels, which lowers their z however far off they are; a drift beside a calibration
+    fitted a little off then lowers the held-out discrepancy without matching anything.
+    A real drift also matches the time structure (autocorrelation, the slow parts),
+    while its wander moves the simulated levels about."""
     index = {k: i for i, k in enumerate(current.keys)}
     rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
     if not rows:
@@ -188,7 +190,10 @@ def _closer(current, after) -> bool:
     with np.errstate(divide='ignore', invalid='ignore'):
         z = (after.real[ai] - after.sim[ai]) / current.se[ci]
     z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
-    return discrepancy(z) < discrepancy(current.z[ci])
+    if discrepancy(z) < discrepancy(current.z[ci]):
+        return True
+    other = np.array([current.keys[i].family != 'level' for i in ci], bool)
+    return discrepancy(z[other]) < discrepancy(current.z[ci][other])
 
 
 def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, current_reps,
