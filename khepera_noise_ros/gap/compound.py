@@ -39,6 +39,7 @@ CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step 
 # max(|z| - 2, 0)^2 (``where.discrepancy``); what is left of a part is worked on by
 # the MIN_LEFT and family rules only above the chance mean + CHANCE_SDS sds.
 CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
+WIDENED = ('level', 'spread')   # statistics whose error bars a drift's wander widens
 
 
 @dataclass
@@ -176,12 +177,13 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
 
 def _closer(current, after) -> bool:
     """Does the step bring the simulated statistics closer to the real ones, judged at
-    the error bars before it: all of them, or those other than the levels?  An effect
-    that adds variance between simulated runs (a drift) widens the error bars of the
-    levels, which lowers their z however far off they are; a drift beside a calibration
-    fitted a little off then lowers the held-out discrepancy without matching anything.
-    A real drift also matches the time structure (autocorrelation, the slow parts),
-    while its wander moves the simulated levels about."""
+    the error bars before it: all of them, or those other than the levels and spreads?
+    An effect that adds variance between and within simulated runs (a drift) widens the
+    error bars of the levels and spreads, which lowers their z however far off they
+    are; a drift beside a calibration fitted a little off then lowers the held-out
+    discrepancy without matching anything.  A real drift also matches the time
+    structure (autocorrelation, correlation), while its wander moves the simulated
+    levels and spreads about."""
     index = {k: i for i, k in enumerate(current.keys)}
     rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
     if not rows:
@@ -192,7 +194,7 @@ def _closer(current, after) -> bool:
     z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
     if discrepancy(z) < discrepancy(current.z[ci]):
         return True
-    other = np.array([current.keys[i].family != 'level' for i in ci], bool)
+    other = np.array([current.keys[i].family not in WIDENED for i in ci], bool)
     return discrepancy(z[other]) < discrepancy(current.z[ci][other])
 
 
