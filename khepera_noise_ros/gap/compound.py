@@ -34,6 +34,14 @@ MIN_LEFT = 0.50           # ... or of what the chosen effects leave of one proto
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
+# Free parameters of each effect's model, beyond its location: when two effects explain
+# the held-out data equally well, the one with fewer wins (correlated noise is the
+# paper's model; intensity-dependent noise with a flat exponent is the same thing).
+# ``diagnose`` ranks single effects by it, each compound step too.
+TIE = 0.10
+PARAMETERS = {'sensor_latency': 1, 'correlated_noise': 1, 'actuator_turn_error': 2,
+              'intensity_dependent_noise': 2, 'temporal_drift': 3,
+              'saturation_quantization': 3, 'sensor_gain_offset': 4}
 CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step is checked on
 # Discrepancy of one statistic with no gap at all, z ~ N(0, 1): mean and variance of
 # max(|z| - 2, 0)^2 (``where.discrepancy``); what is left of a part is worked on by
@@ -206,7 +214,6 @@ def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, curr
     of the paired replicates.  A spread law of exponent 0 shared by a few sensors is a
     group of correlated noise; told apart by the data alone the group would lose to the
     law's one extra parameter by chance half the time."""
-    from .diagnose import PARAMETERS, TIE       # diagnose imports this module
     cand, after, _, reps, _, _ = step
     rivals = sorted((t for t in trials if t[1] is not cand
                      and PARAMETERS.get(t[1].name, 99) < PARAMETERS.get(cand.name, 99)),
