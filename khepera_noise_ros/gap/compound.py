@@ -178,7 +178,11 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
     family = _family_gain(b, first_cmp, current_cmp, after)
     counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
                      family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
-    if counts and not _closer(current_cmp, after):
+    # only a slow wander widens the levels' error bars without bringing anything closer
+    # (the level inflation of ``Target``); an effect that adds fast noise rightly widens
+    # the spreads' error bars, and judged at the old ones it loses its share
+    if counts and effects[-1].name == fx.TemporalDrift.name and \
+            not _closer(current_cmp, after):
         counts = ''
     return counts, reps, p, added
 
