@@ -162,9 +162,11 @@ def _arc(rng, low: int, high: int) -> tuple:
     return tuple(sorted(RING[(start + i) % 8] for i in range(size)))
 
 
-def draw_case(rng) -> tuple[str, emu.EffectsConfig, dict]:
-    """(effect name, emulator configuration, truth: location and settings)."""
-    name = VOCABULARY[int(rng.integers(0, len(VOCABULARY)))]
+def draw_case(rng, name: str | None = None) -> tuple[str, emu.EffectsConfig, dict]:
+    """(effect name, emulator configuration, truth: location and settings); ``name``
+    chooses the effect (else it is drawn)."""
+    if name is None:
+        name = VOCABULARY[int(rng.integers(0, len(VOCABULARY)))]
     base = emu.EffectsConfig.none(SENSOR_NOISE)
     if name == 'none':
         return name, base, {'location': None}

@@ -26,6 +26,7 @@ import numpy as np
 from . import effects as fx
 from . import closednoise, dropout, fit
 from .target import Target
+from .where import Z_CAP, discrepancy
 
 MIN_ADDED = 0.005         # share of the discrepancy before any effect a step must remove
 MIN_LOCAL = 0.10          # ... or this share of one protocol's own discrepancy (see below)
@@ -33,7 +34,20 @@ MIN_LEFT = 0.50           # ... or of what the chosen effects leave of one proto
 STEP_ALPHA = 0.05         # one-sided, paired bootstrap
 FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
+# Free parameters of each effect's model, beyond its location: when two effects explain
+# the held-out data equally well, the one with fewer wins (correlated noise is the
+# paper's model; intensity-dependent noise with a flat exponent is the same thing).
+# ``diagnose`` ranks single effects by it, each compound step too.
+TIE = 0.10
+PARAMETERS = {'sensor_latency': 1, 'correlated_noise': 1, 'actuator_turn_error': 2,
+              'intensity_dependent_noise': 2, 'temporal_drift': 3,
+              'saturation_quantization': 3, 'sensor_gain_offset': 4}
 CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step is checked on
+# Discrepancy of one statistic with no gap at all, z ~ N(0, 1): mean and variance of
+# max(|z| - 2, 0)^2 (``where.discrepancy``); what is left of a part is worked on by
+# the MIN_LEFT and family rules only above the chance mean + CHANCE_SDS sds.
+CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
+WIDENED = ('level', 'spread')   # statistics whose error bars a drift's wander widens
 
 
 @dataclass
@@ -89,6 +103,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
     d_prev = cmp0.discrepancy
     steps = [entry(effect0, note0, d_before, d_prev, d_before,
                    paired_p(before_reps, reps0, d_before, d_prev))]
+    steps[0]['counted_by'] = 'top_effect'
     chosen, notes = [effect0], [note0]
     current_cmp, current_reps = cmp0, reps0
     rejected: list = []
@@ -109,7 +124,8 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         if not trials:
             break
         step = None
-        for rank, (d, cand, after) in enumerate(sorted(trials, key=lambda t: t[0])):
+        trials.sort(key=lambda t: t[0])
+        for rank, (d, cand, after) in enumerate(trials):
             effects = chosen + [cand.effect]
             if rank < JOINT:
                 # fitted jointly: the chosen effects refitted given the candidate (a proxy
@@ -120,26 +136,26 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     after_joint = b.compare(joint)
                     if after_joint.discrepancy < after.discrepancy:
                         effects, after = joint, after_joint
-            d_new = after.discrepancy
-            reps = b.replicate_discrepancies(after)
-            p = paired_p(current_reps, reps, d_prev, d_new)
-            added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
-            gains = _local_gains(first_cmp, current_cmp, after)
-            if _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects)):
-                step = (cand, after, effects, reps, p)
+            judged = _judge(b, first_cmp, current_cmp, current_reps, chosen, effects, after,
+                            d_before, d_prev)
+            if judged[0]:
+                step = (cand, after, effects, judged[1], judged[2], judged[0])
                 break
             if not rejected:
-                rejected = [{'name': cand.name, 'added_reduction': added, 'p_value': p,
-                             'note': cand.note}]
+                rejected = [{'name': cand.name, 'added_reduction': judged[3],
+                             'p_value': judged[2], 'note': cand.note}]
         if step is None:
             break
-        cand, after, chosen, reps, p = step
+        step = _simplest(step, trials, b, first_cmp, current_cmp, current_reps, chosen,
+                         d_before, d_prev)
+        cand, after, chosen, reps, p, rule = step
         rejected = []
         notes.append(cand.note)
         remaining.remove(cand.name)
         current_cmp, current_reps = after, reps
         d_last, d_prev = d_prev, after.discrepancy
         steps.append(entry(chosen[-1], cand.note, d_before, d_prev, d_last, p))
+        steps[-1]['counted_by'] = rule
         if log:
             log(f'compound: + {cand.name} -> {1 - d_prev / d_before:.2f}')
     # the parameters reported are the backfitted ones
@@ -150,17 +166,96 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     current_reps, rejected)
 
 
-def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float,
-            confirmed) -> bool:
-    """Does a step count: significant (``p < STEP_ALPHA``), lowering the discrepancy,
-    and large enough by one of three measures (see ``_local_gains``); one large only by
-    what is left must also be ``confirmed()``."""
-    if p >= STEP_ALPHA or d_new >= d_prev:
-        return False
-    before_any, left = gains
-    if added >= MIN_ADDED or before_any >= MIN_LOCAL:
+def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effects: list,
+           after, d_before: float, d_prev: float) -> tuple:
+    """(the rule it counts by or '', replicate discrepancies, p, added share) of the
+    step from ``chosen`` to ``effects`` (held-out comparison ``after``)."""
+    d_new = after.discrepancy
+    reps = b.replicate_discrepancies(after)
+    p = paired_p(current_reps, reps, d_prev, d_new)
+    added = (d_prev - d_new) / d_before if d_before > 0 else 0.0
+    gains = _local_gains(first_cmp, current_cmp, after)
+    family = _family_gain(b, first_cmp, current_cmp, after)
+    counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
+                     family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
+    # only a slow wander widens the levels' error bars without bringing anything closer
+    # (the level inflation of ``Target``); an effect that adds fast noise rightly widens
+    # the spreads' error bars, and judged at the old ones it loses its share
+    if counts and effects[-1].name == fx.TemporalDrift.name and \
+            not _closer(current_cmp, after):
+        counts = ''
+    return counts, reps, p, added
+
+
+def _closer(current, after) -> bool:
+    """Does the step bring the simulated statistics closer to the real ones, judged at
+    the error bars before it: all of them, or those other than the levels and spreads?
+    An effect that adds variance between and within simulated runs (a drift) widens the
+    error bars of the levels and spreads, which lowers their z however far off they
+    are; a drift beside a calibration fitted a little off then lowers the held-out
+    discrepancy without matching anything.  A real drift also matches the time
+    structure (autocorrelation, correlation), while its wander moves the simulated
+    levels and spreads about."""
+    index = {k: i for i, k in enumerate(current.keys)}
+    rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
+    if not rows:
         return True
-    return left >= MIN_LEFT and confirmed()
+    ai, ci = (np.array(r, np.int64) for r in zip(*rows))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        z = (after.real[ai] - after.sim[ai]) / current.se[ci]
+    z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
+    if discrepancy(z) < discrepancy(current.z[ci]):
+        return True
+    other = np.array([current.keys[i].family not in WIDENED for i in ci], bool)
+    return discrepancy(z[other]) < discrepancy(current.z[ci][other])
+
+
+def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, current_reps,
+              chosen: list, d_before: float, d_prev: float) -> tuple:
+    """The step's candidate, or a simpler one (fewer free parameters, the single effects'
+    parsimony rule of ``diagnose``) that also counts and explains the held-out data as
+    well: its discrepancy within ``TIE`` of the step's, or not beaten in ``1 - alpha``
+    of the paired replicates.  A spread law of exponent 0 shared by a few sensors is a
+    group of correlated noise; told apart by the data alone the group would lose to the
+    law's one extra parameter by chance half the time."""
+    cand, after, _, reps, _, _ = step
+    rivals = sorted((t for t in trials if t[1] is not cand
+                     and PARAMETERS.get(t[1].name, 99) < PARAMETERS.get(cand.name, 99)),
+                    key=lambda t: (PARAMETERS.get(t[1].name, 99), t[0]))
+    for d, rival, rival_after in rivals:
+        if d > (1 + TIE) * after.discrepancy:
+            rival_reps = b.replicate_discrepancies(rival_after)
+            if np.mean(reps < rival_reps) >= 1 - STEP_ALPHA:
+                continue
+        effects = chosen + [rival.effect]
+        rule, rival_reps, p, _ = _judge(b, first_cmp, current_cmp, current_reps, chosen,
+                                        effects, rival_after, d_before, d_prev)
+        if rule:
+            return rival, rival_after, effects, rival_reps, p, rule + ', simpler'
+    return step
+
+
+def _counts(added: float, gains: tuple, p: float, d_new: float, d_prev: float,
+            confirmed, family: float = 0.0, family_confirmed=None) -> str:
+    """Which rule a step counts by ('' for none): significant (``p < STEP_ALPHA``),
+    lowering the discrepancy, and large enough by one of three measures (see
+    ``_local_gains``); one large only by what is left must also be ``confirmed()``.  A
+    step that does not count so, but removes ``MIN_LOCAL`` of one statistic family's own
+    discrepancy (``_family_gain``, significant on its own replicates) and of all that is
+    left, counts when ``family_confirmed()``."""
+    if p >= STEP_ALPHA or d_new >= d_prev:
+        return ''
+    before_any, left = gains
+    if added >= MIN_ADDED:
+        return 'min_added'
+    if before_any >= MIN_LOCAL:
+        return 'min_local'
+    if left >= MIN_LEFT and confirmed():
+        return 'min_left'
+    if family >= MIN_LOCAL and d_prev - d_new >= MIN_LOCAL * d_prev and \
+            family_confirmed is not None and family_confirmed():
+        return 'family'
+    return ''
 
 
 def _confirmed(b: Target, chosen: list, effects: list) -> bool:
@@ -189,9 +284,57 @@ def _local_gains(before, current, after) -> tuple:
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
             before_any = max(before_any, (d1 - d2) / d0)
-        if d1 > 0:
+        if d1 > _chance(sum(_protocol(k.family) == part for k in current.keys)):
             left = max(left, (d1 - d2) / d1)
     return before_any, left
+
+
+def _chance(n: int) -> float:
+    """The discrepancy ``n`` statistics reach by chance with no gap left (mean + 3 sd):
+    once a part's remainder is below it, halving it is fitting the noise (a part with
+    few statistics left at 0.5 halves by chance)."""
+    return n * CHANCE_MEAN + CHANCE_SDS * np.sqrt(n * CHANCE_VAR)
+
+
+def _family_gain(b: Target, before, current, after) -> float:
+    """The largest share a step removes of one statistic family's own held-out
+    discrepancy before any effect, among families where the step's fall is significant
+    on the family's own paired replicates.  A dominant effect (a latency's step
+    responses, a turn error's turn responses) makes most of a protocol's discrepancy;
+    a drift or a calibration beside it acts on other families (levels,
+    autocorrelation), whose share of the protocol's discrepancy is then small."""
+    best = 0.0
+    for fam in sorted({k.family for k in before.keys}):
+        d0, d1, d2 = (_family(c, fam) for c in (before, current, after))
+        if d0 <= 0 or d2 >= d1 or (d1 - d2) / d0 < MIN_LOCAL or \
+                d1 <= _chance(sum(k.family == fam for k in current.keys)):
+            continue
+        p = paired_p(_family_reps(b, current, fam), _family_reps(b, after, fam), d1, d2)
+        if p < STEP_ALPHA:
+            best = max(best, (d1 - d2) / d0)
+    return best
+
+
+def _family_confirmed(b: Target, before, chosen: list, effects: list) -> bool:
+    """A step that counts only by one family's share is checked again against a second
+    simulated side (another simulator seed), as ``_confirmed`` does."""
+    other = copy.copy(b)
+    other.seed = b.seed + CONFIRM_SEED
+    prev, new = other.compare(chosen), other.compare(effects)
+    reps_prev = other.replicate_discrepancies(prev)
+    reps_new = other.replicate_discrepancies(new)
+    return new.discrepancy < prev.discrepancy and \
+        paired_p(reps_prev, reps_new, prev.discrepancy, new.discrepancy) < STEP_ALPHA and \
+        _family_gain(other, before, prev, new) >= MIN_LOCAL
+
+
+def _family(c, family: str) -> float:
+    keep = np.array([k.family == family for k in c.keys], bool)
+    return c.select(keep).discrepancy if keep.any() else 0.0
+
+
+def _family_reps(b: Target, c, family: str) -> np.ndarray:
+    return b.replicate_discrepancies(c.select([k.family == family for k in c.keys]))
 
 
 def _part(c, part: str) -> float:

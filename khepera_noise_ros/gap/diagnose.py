@@ -22,6 +22,7 @@ import numpy as np
 from ..recording import Recording
 from . import effects as fx
 from . import allan, compound, fit, remainder, replay, split, transfer
+from .compound import PARAMETERS, TIE   # the parsimony rule's table, shared with the steps
 from .simconfig import SimConfig
 from .target import Target
 from .where import ALPHA, Comparison, entries, localise
@@ -30,13 +31,6 @@ FORMAT = 'khepera-noise-diagnosis/1'
 MIN_REDUCTION = 0.25       # an explanation must remove at least this share of the gap
 REDUCTION_ALPHA = 0.05     # ... and do so in 95% of the bootstrap replicates
 MIN_SAMPLES = 40
-# Free parameters of each effect's model, beyond its location: when two effects explain
-# the held-out data equally well, the one with fewer wins (correlated noise is the
-# paper's model; intensity-dependent noise with a flat exponent is the same thing).
-TIE = 0.10
-PARAMETERS = {'sensor_latency': 1, 'correlated_noise': 1, 'actuator_turn_error': 2,
-              'intensity_dependent_noise': 2, 'temporal_drift': 3,
-              'saturation_quantization': 3, 'sensor_gain_offset': 4}
 
 
 @dataclass
