@@ -221,3 +221,23 @@ def test_repaired_recordings_are_remembered_while_they_live():
     assert marks[:, 3, 0].sum() > 0 and ends[3, 0] == 0.0
     assert prepared.readings[:, 3].min() > 0                 # repaired
     assert replay.kind(prepared) == 'stationary'
+
+
+def test_readings_flanked_by_their_own_value_are_never_dropouts():
+    # the shortcut that skips them must agree with the full test on every reading
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        n = 400
+        col = np.clip(np.round(rng.normal(530, 30, n)), 0, 525)
+        col[rng.random(n) < 0.03] = 0.0
+        sizes = np.array([n // 4] * 4)
+        first = np.cumsum(np.r_[0, sizes[:-1]])
+        run_of = np.repeat(np.arange(4), sizes)
+        for value in (0.0, 525.0):
+            i = np.flatnonzero(col == value)
+            if i.size == 0:
+                continue
+            far, _ = dropout._far(col, i, run_of, first, sizes)
+            flanked = dropout._flanked(i, run_of)
+            assert not far[flanked].any()
+            assert flanked.any() or value == 0.0     # clipped stretches at 525 exist

@@ -86,6 +86,9 @@ def repair(x: np.ndarray, runs: list,
             i = np.sort(i[i >= 0])
             if i.size == 0 or (moving and _stretched(i, run_of)):
                 continue
+            i = i[~_flanked(i, run_of)]
+            if i.size == 0:
+                continue
             if col is None:
                 col = x[order, k].astype(np.float64)
             far, lower = _far(col, i, run_of, first, sizes)
@@ -108,6 +111,17 @@ def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
     beside[1:] |= pair
     beside[:-1] |= pair
     return beside.sum() > STRETCHED * i.size
+
+
+def _flanked(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+    """Which readings at a value (positions ``i``, sorted) have the samples just before
+    and after them in the same run at that value too: two of four neighbours alike, so
+    never isolated (``ISOLATED``).  Dropping them first spares ``_far`` a sensor's long
+    clipped stretches (the same answer, found cheaper)."""
+    pair = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    both = np.zeros(i.size, bool)
+    both[1:-1] = pair[:-1] & pair[1:]
+    return both
 
 
 def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
