@@ -91,28 +91,25 @@ def repair(x: np.ndarray, runs: list,
                 todo.append((k, end, i))
     if not todo:
         return repaired, out, ends
-    # the per-reading parts of ``_far`` for every channel at once: most readings at an
-    # extreme are a noise tail's, near their neighbours (the same answer, fewer calls)
+    # the per-reading tests for every channel at once: most readings at an extreme are a
+    # noise tail's, near their neighbours; only what is left needs its run's scale
     at = np.concatenate([i for _, _, i in todo])
     k_at = np.concatenate([np.full(i.size, k) for k, _, i in todo])
-    xo = x[order]
-    near, _, d = _near_level(xo[at, k_at], xo[_neighbours(run_of, first, sizes, NEAR, at), k_at])
-    if near.any():
-        w = xo[_neighbours(run_of, first, sizes, WINDOW, at[near]), k_at[near]]
-        near[near] = d[near] >= QUICK * SPREADS * _quick_spread(w.astype(np.float64))
+    near, lower, d = _local_test(x[order], at, k_at, run_of, first, sizes)
     cols: dict = {}
-    for (k, end, i), keep in zip(todo, np.split(near, np.cumsum([i.size for *_, i in todo])[:-1])):
-        i = i[keep]
-        if i.size == 0:
+    cuts = np.cumsum([i.size for *_, i in todo])[:-1]
+    for (k, end, i), keep, low, dist in zip(todo, *(np.split(v, cuts) for v in (near, lower, d))):
+        if not keep.any():
             continue
         if k not in cols:
             cols[k] = x[order, k].astype(np.float64)
-        far, lower = _far(cols[k], i, run_of, first, sizes)
+        i, low = i[keep], low[keep]
+        far = _scaled(cols[k], i, dist[keep], run_of, first, sizes)
         out[order[i[far]], k, end] = 1.0
         if far.any():
             if repaired is x:
                 repaired = x.copy()
-            repaired[order[i[far]], k] = lower[far]
+            repaired[order[i[far]], k] = low[far]
     return repaired, out, ends
 
 
@@ -122,11 +119,17 @@ def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
     sensor at a limit (a lamp saturating it) for stretches, and a single step's visit
     there is then no dropout; dropouts at a rate p lie next to each other about 2p of
     the time."""
-    pair = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    pair = _adjacent(i, run_of)
     beside = np.zeros(i.size, bool)
     beside[1:] |= pair
     beside[:-1] |= pair
     return beside.sum() > STRETCHED * i.size
+
+
+def _adjacent(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+    """(len(i) - 1,) whether positions ``i[j]`` and ``i[j + 1]`` (sorted) are consecutive
+    samples of one run."""
+    return (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
 
 
 def _near_level(value: np.ndarray, around: np.ndarray) -> tuple:
@@ -157,25 +160,40 @@ def _quick_spread(near: np.ndarray) -> np.ndarray:
 def _flanked(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
     """Which readings at a value (positions ``i``, sorted) have the samples just before
     and after them in the same run at that value too: two of four neighbours alike, so
-    never isolated (``ISOLATED``).  Dropping them first spares ``_far`` a sensor's long
+    never isolated (``ISOLATED``).  Dropping them first spares the tests a sensor's long
     clipped stretches (the same answer, found cheaper)."""
-    pair = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    pair = _adjacent(i, run_of)
     both = np.zeros(i.size, bool)
     both[1:-1] = pair[:-1] & pair[1:]
     return both
 
 
 def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
-    """(which of the readings at positions ``i`` are isolated and far from their local
-    level, the lower middle of their neighbours)."""
-    far, lower, d = _near_level(col[i], col[_neighbours(run_of, first, sizes, NEAR, i)])
-    if far.any():                   # a quick robust sd from the nearby readings first
-        near = col[_neighbours(run_of, first, sizes, WINDOW, i[far])]
-        far[far] = d[far] >= QUICK * SPREADS * _quick_spread(near)
+    """(which of the readings at positions ``i`` of one channel ``col`` are isolated and
+    far from their local level, the lower middle of their neighbours)."""
+    far, lower, d = _local_test(col[:, None], i, np.zeros(i.size, np.int64), run_of, first,
+                                sizes)
     if far.any():
-        scale = _scales(col, run_of, first, sizes, np.unique(run_of[i[far]]))
-        far &= d >= SPREADS * scale[run_of[i]]
+        far[far] = _scaled(col, i[far], d[far], run_of, first, sizes)
     return far, lower
+
+
+def _local_test(xo, at, k, run_of, first, sizes) -> tuple:
+    """``_near_level`` of the readings at positions ``at`` of channels ``k`` (``xo``: samples
+    run by run), then a quick robust sd from the ``WINDOW`` around those still far: it
+    rules out, with a margin, readings their run's scale would."""
+    far, lower, d = _near_level(xo[at, k], xo[_neighbours(run_of, first, sizes, NEAR, at), k])
+    if far.any():
+        near = xo[_neighbours(run_of, first, sizes, WINDOW, at[far]), k[far]]
+        far[far] = d[far] >= QUICK * SPREADS * _quick_spread(near.astype(np.float64))
+    return far, lower, d
+
+
+def _scaled(col, i, d, run_of, first, sizes) -> np.ndarray:
+    """Which readings at positions ``i``, ``d`` from their local level, lie ``SPREADS``
+    robust sds of their run (about its local levels) away."""
+    scale = _scales(col, run_of, first, sizes, np.unique(run_of[i]))
+    return d >= SPREADS * scale[run_of[i]]
 
 
 _EPISODES: dict = {}
