@@ -263,13 +263,21 @@ def _confirmed(b: Target, chosen: list, effects: list) -> bool:
     second simulated side (another simulator seed): once the remainder is small the
     simulator's own noise, which the paired bootstrap of the real data leaves out, can
     make a step of that size."""
+    _, prev, new = _second_seed(b, chosen, effects)
+    return new is not None and _local_gains(prev, prev, new)[1] >= MIN_LEFT
+
+
+def _second_seed(b: Target, chosen: list, effects: list) -> tuple:
+    """(the target on another simulator seed, its comparisons with ``chosen`` and with
+    ``effects``); the latter None unless the step lowers the discrepancy there too, in
+    ``1 - alpha`` of the paired replicates."""
     other = copy.copy(b)
     other.seed = b.seed + CONFIRM_SEED
     prev, new = other.compare(chosen), other.compare(effects)
     p = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
                  prev.discrepancy, new.discrepancy)
-    left = _local_gains(prev, prev, new)[1]
-    return p < STEP_ALPHA and left >= MIN_LEFT and new.discrepancy < prev.discrepancy
+    ok = p < STEP_ALPHA and new.discrepancy < prev.discrepancy
+    return other, prev, new if ok else None
 
 
 def _local_gains(before, current, after) -> tuple:
@@ -318,19 +326,12 @@ def _family_gain(b: Target, before, current, after) -> float:
 def _family_confirmed(b: Target, before, chosen: list, effects: list) -> bool:
     """A step that counts only by one family's share is checked again against a second
     simulated side (another simulator seed), as ``_confirmed`` does."""
-    other = copy.copy(b)
-    other.seed = b.seed + CONFIRM_SEED
-    prev, new = other.compare(chosen), other.compare(effects)
-    reps_prev = other.replicate_discrepancies(prev)
-    reps_new = other.replicate_discrepancies(new)
-    return new.discrepancy < prev.discrepancy and \
-        paired_p(reps_prev, reps_new, prev.discrepancy, new.discrepancy) < STEP_ALPHA and \
-        _family_gain(other, before, prev, new) >= MIN_LOCAL
+    other, prev, new = _second_seed(b, chosen, effects)
+    return new is not None and _family_gain(other, before, prev, new) >= MIN_LOCAL
 
 
 def _family(c, family: str) -> float:
-    keep = np.array([k.family == family for k in c.keys], bool)
-    return c.select(keep).discrepancy if keep.any() else 0.0
+    return _discrepancy_of(c, lambda fam: fam == family)
 
 
 def _family_reps(b: Target, c, family: str) -> np.ndarray:
@@ -341,7 +342,12 @@ def _part(c, part: str) -> float:
     """The discrepancy of one protocol's statistics; the closed loop's noise statistics
     (``gap.closednoise``) count on their own: sensor effects act there beside a latency
     or turn error that dominates the closed loop's other statistics."""
-    keep = np.array([_protocol(k.family) == part for k in c.keys], bool)
+    return _discrepancy_of(c, lambda fam: _protocol(fam) == part)
+
+
+def _discrepancy_of(c, wanted) -> float:
+    """The discrepancy of the statistics of ``c`` whose family is ``wanted`` (0 if none)."""
+    keep = np.array([wanted(k.family) for k in c.keys], bool)
     return c.select(keep).discrepancy if keep.any() else 0.0
 
 
