@@ -95,7 +95,7 @@ def saturation(target: Target, c: Comparison) -> Candidate:
             _grid(y[(y > y.min()) & (y < y.max())]) != lattice
         if lattice[0] > 1 and measured:
             grid[sensor] = lattice
-    stationary = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    stationary = target.of_kind('stationary')
     lost = limits.dropouts(target.recordings, target.simulate())    # closed loop too
     if not (low or high or grid or lost):
         return Candidate(name, None, 'no readings held at a limit, no coarse value grid and '
@@ -155,7 +155,7 @@ def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndar
     simulated, from the stationary recordings; the comparison's own correlations (the
     whole residual) when there are none."""
     channels = _channels(target)
-    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    real = target.of_kind('stationary')
     if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
         z = excess_evidence(c, channels)[0]
         return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z

@@ -129,7 +129,7 @@ def _significant(ex: dict) -> dict:
 def of_target(target) -> dict:
     """``wandering`` of a fitting target's stationary recordings against its simulator
     (with the effects it is given)."""
-    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    real = target.of_kind('stationary')
     if not real:
         return {}
     return wandering(real, target.simulate(kinds=('stationary',)))

@@ -96,7 +96,7 @@ def _factor(cov: np.ndarray) -> np.ndarray:
 
 def fit(target: Target) -> fx.EmpiricalNoise | None:
     """The empirical remainder of ``target`` (its ``given`` effects in the simulator)."""
-    real_recs = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    real_recs = target.of_kind('stationary')
     if not real_recs:
         return None
     sim_recs = target.simulate(kinds=('stationary',))

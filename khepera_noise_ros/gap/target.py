@@ -20,7 +20,7 @@ from ..recording import Recording
 from . import dropout, replay, statistics
 from .simconfig import SimConfig
 from .statistics import Stats
-from .where import FLOOR, FLOORS, MARGIN, Z_CAP, Comparison, compare, discrepancy
+from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, squared_floors
 
 SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
@@ -61,6 +61,10 @@ class Target:
 
     def _chosen(self, kinds) -> list[int]:
         return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
+
+    def of_kind(self, kind: str) -> list[Recording]:
+        """The (dropout-repaired) recordings of one protocol, 'stationary' or 'closed_loop'."""
+        return [self.recordings[i] for i in self._chosen((kind,))]
 
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
@@ -212,7 +216,7 @@ class Target:
                      and (k.family in families if families is not None
                           else limits or k.family not in LIMITS_ONLY)]
             ri, si = (np.array(p, np.int64) for p in zip(*pairs))
-            floor = np.array([FLOORS.get(real.keys[i].family, FLOOR) for i in ri]) ** 2
+            floor = squared_floors([real.keys[i] for i in ri])
             if len(cache) > 32:
                 cache.clear()
             hit = cache[key] = (real.keys, sim.keys, ri, si, floor)

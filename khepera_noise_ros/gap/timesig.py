@@ -150,7 +150,7 @@ def of_target(target) -> dict | None:
     only: with the observed base the levels are the recording's own)."""
     if target.base == 'observed':
         return None
-    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    real = target.of_kind('stationary')
     if not real:
         return None
     return shared_change(real, target.simulate(kinds=('stationary',)),
@@ -160,7 +160,7 @@ def of_target(target) -> dict | None:
 def steady_rows(rows: list, target, change: dict) -> list:
     """Level rows (key, real, sim, se, z) of a comparison with the real levels taken from
     the readings with the shared change removed."""
-    real = [r for r, k in zip(target.recordings, target.kinds) if k == 'stationary']
+    real = target.of_kind('stationary')
     sums: dict = {}
     for rec, runs in zip(real, change['runs']):
         x = steady(rec, runs)

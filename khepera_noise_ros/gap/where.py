@@ -100,8 +100,12 @@ def compare(real: Stats, sim: Stats, inflation: np.ndarray | None = None) -> Com
 
 def standard_error(variance: np.ndarray, keys: list[Key]) -> np.ndarray:
     """sqrt(variance + floor^2), the floor of each statistic's family (``FLOORS``)."""
-    floor = np.array([FLOORS.get(k.family, FLOOR) for k in keys])
-    return np.sqrt(variance + floor ** 2)
+    return np.sqrt(variance + squared_floors(keys))
+
+
+def squared_floors(keys: list[Key]) -> np.ndarray:
+    """The squared least standard error of each statistic (its family's ``FLOORS``)."""
+    return np.array([FLOORS.get(k.family, FLOOR) for k in keys]) ** 2
 
 
 def entries(c: Comparison, limit: int = 40, alpha: float = ALPHA) -> list[dict]:
