@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..recording import Recording
-from . import dropout, replay, statistics
+from . import dropout, rarecount, replay, statistics
 from .simconfig import SimConfig
 from .statistics import Stats
 from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, squared_floors
@@ -179,7 +179,8 @@ class Target:
         simulated side, 2-3 copies, is the more precise: ``SIM_REPLICATES`` suffice)."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
         sim, factor = self._simulated(effects, replicates, None)
-        return compare(self.real, sim, factor)
+        # dropout shares: rare counts, judged by a count model (``gap.rarecount``)
+        return rarecount.compare(self, compare(self.real, sim, factor), effects)
 
     def objective(self, effects=(), kinds=None, families=None, margin=MARGIN,
                   limits=False) -> float:
