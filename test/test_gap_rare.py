@@ -1,0 +1,147 @@
+"""Rare events: few dropouts (judged by an exact count test), and pile-ups at either end.
+
+Recordings are made by the simulator (``test_gap_support``) and edited by hand: each
+reading of the chosen sensors, with probability ``rate``, reads ``value`` (a dropout).
+A pile-up is a ``saturation_quantization`` limit set by the robot's simulator.
+"""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from khepera_noise_ros.core.noise import NoiseModel
+from khepera_noise_ros.gap import diagnose, pileup, rarecount
+from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.gap.target import Target
+from test_gap_dropout import OPTIONS, chosen, drop, dropout_in_set, saturation, stationary
+from test_gap_support import CONDITIONS, CONFIG, closed_loop_protocol, recorded, \
+    stationary_protocol
+
+NORMAL = dataclasses.replace(
+    CONFIG, noise=NoiseModel.independent_only(0.02, distribution='normal'))
+DIM = {k: v for k, v in CONDITIONS.items() if k != 'task'}
+GAIN = fx.SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0))
+
+
+# -- the count test ---------------------------------------------------------------------
+
+def test_the_count_test_is_exact_for_few_events_and_silent_without_any():
+    # seven against none on twenty times the readings: far beyond chance (the bootstrap's
+    # error bar of about the root of the count made it z ~ 2.9)
+    z, se = rarecount.test(7, 2400, 0, 48000)
+    assert z > 5.5
+    assert se == pytest.approx((7 / 2400) / z)
+    assert rarecount.test(0, 2400, 0, 48000)[0] == 0.0          # none on either side
+    assert rarecount.test(0, 2400, 3, 48000)[0] == 0.0          # fewer real: no evidence
+    assert abs(rarecount.test(4, 2400, 80, 48000)[0]) < 1.0     # the same rate
+    assert rarecount.test(0, 2400, 200, 48000)[0] < -3.5        # too few real
+    # under equal rates the test errs at most at its nominal rate (discrete: fewer)
+    rng = np.random.default_rng(0)
+    z = [rarecount.test(rng.poisson(2.0), 2400, rng.poisson(40.0), 48000)[0]
+         for _ in range(2000)]
+    assert np.mean(np.abs(z) > 1.96) < 0.05
+
+
+def test_a_comparison_counts_the_dropouts_against_many_simulated_copies():
+    rec = drop(stationary(), (3,), 0.005, 0.0)
+    target = Target([rec], CONFIG, 0, replicates=40)
+    assert rarecount.copies(target) > target.copies
+    c = target.compare()
+    rows = {k: i for i, k in enumerate(c.keys) if k.family == 'dropout'}
+    one = rows[next(k for k in rows if k.sensors == (3,) and 'lowest' in k.part)]
+    assert c.real[one] * len(rec) >= 5 and c.sim[one] == 0.0
+    assert c.significant()[one]
+    others = [i for k, i in rows.items() if 3 not in k.sensors]
+    assert not c.significant()[others].any()
+
+
+# -- few dropouts found -------------------------------------------------------------------
+
+def test_one_sensor_dropping_out_half_a_percent_is_found():
+    """About a dozen dropouts in 2,400 readings: before, the gap was not significant."""
+    result = diagnose.diagnose([drop(stationary(), (3,), 0.005, 0.0)], OPTIONS)
+    assert result.gap_significant
+    assert result.where[0]['statistic'] == 'dropout' and 3 in result.where[0]['sensors']
+    assert result.top_effect == 'saturation_quantization'
+    assert saturation(result)['sensors'] == [3]
+    assert saturation(result)['parameters']['dropout_value'] == 0.0
+    assert dropout_in_set(result)
+
+
+def test_dropouts_beside_a_gain_are_added_at_forty_replicates():
+    result = diagnose.diagnose([drop(stationary((GAIN,)), (1, 4, 6), 0.01, 0.0)], OPTIONS)
+    assert chosen(result)[0] == 'sensor_gain_offset'
+    assert dropout_in_set(result)
+    assert saturation(result)['sensors'] == [1, 4, 6]
+
+
+# -- controls ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize('seed', range(10))
+def test_clean_recordings_count_no_dropouts(seed):
+    """Ten clean recordings (different seeds): no dropout statistic differs, by the counts."""
+    for rec in (stationary(seed=seed), recorded(closed_loop_protocol(12), seed=seed)):
+        target = Target([rec], CONFIG, 0, replicates=20)
+        c = target.compare()
+        rows = [i for i, k in enumerate(c.keys) if k.family in rarecount.FAMILIES]
+        assert rows and not c.significant()[rows].any()
+        assert np.all(np.abs(c.z[rows]) < 3.0)
+
+
+@pytest.mark.parametrize('robot', [
+    fx.SaturationQuantization(tuple(range(8)), 0.0, 500.0),      # a real ceiling: a limit
+    fx.SaturationQuantization(tuple(range(8)), step=4.0),          # a value lattice
+    fx.IntensityDependentNoise(tuple(range(8)), 0.04, 2.0),        # a spread law's tails
+], ids=['ceiling', 'lattice', 'spread law'])
+def test_limits_lattices_and_spread_laws_are_not_dropouts(robot):
+    target = Target([stationary((robot,))], CONFIG, 0, replicates=20)
+    c = target.compare()
+    rows = [i for i, k in enumerate(c.keys) if k.family in rarecount.FAMILIES]
+    assert rows and not c.significant()[rows].any()
+    assert rarecount.copies(target) > target.copies          # judged by the counts
+
+
+# -- pile-ups at either end -------------------------------------------------------------
+
+def test_a_pile_at_either_end_stands_above_a_smooth_tail():
+    """Each end's pile is looked for among that end's own outermost readings; a clip at
+    3% of readings holds several times what a smooth tail holds there (before: the high
+    end borrowed the low end's count of values, and on a smooth tail the share looked at
+    reached inward to where the density is about that of a 3% pile)."""
+    rng = np.random.default_rng(4)
+    smooth = np.round(300 + 10 * rng.standard_normal((40000, 1)))
+    low, high = np.quantile(smooth, [0.03, 0.97])
+    for clipped, end, value in ((np.minimum(smooth, high), 1, high),
+                                (np.maximum(smooth, low), 0, low)):
+        assert pileup._piles(clipped[:, 0])[end] == value
+        real, sim = (pileup.edge_hits(x)[:, 0, end].mean() for x in (clipped, smooth))
+        assert real > 3.0 * sim, (end, real, sim)
+    # a lattice has no pile at either end
+    lattice = np.round(smooth / 4) * 4
+    share = pileup.edge_hits(lattice)[:, 0].mean(axis=0)
+    assert np.all(share < 0.02)
+
+
+def test_the_high_end_is_counted_from_the_high_end():
+    """A floor holding many readings at one value, a ceiling holding 1.5% with a few
+    strays beyond it: the high pile is the mode of the high end's own outermost
+    readings, the ceiling (before, the high end looked at as many values as the low
+    end's 2% held, here one: the outermost stray)."""
+    rng = np.random.default_rng(5)
+    x = np.round(300 + 40 * rng.standard_normal(6000))
+    x = np.clip(x, np.quantile(x, 0.05).round(), np.quantile(x, 0.985).round())
+    floor, ceiling = x.min(), x.max()
+    x[:3] = ceiling + np.array([20.0, 30.0, 40.0])             # strays beyond the ceiling
+    assert pileup._piles(x) == (floor, ceiling)
+    assert pileup.edge_hits(x[:, None])[:, 0, 1].mean() > 0.014
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_clean_recordings_show_no_pile(seed):
+    """Ten clean recordings of the pile-up tests' protocol (3,600 samples, normal noise):
+    no pile-up statistic differs (before, seed 3 had one at the high end)."""
+    rec = recorded(stationary_protocol(samples=150, conditions=DIM), (), config=NORMAL,
+                   seed=seed)
+    c = Target([rec], NORMAL, 0, replicates=40).compare()
+    rows = [i for i, k in enumerate(c.keys) if k.family == 'pileup']
+    assert not c.significant()[rows].any()
