@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.gap import diagnose, pileup, rarecount
+from khepera_noise_ros.gap import diagnose, dropout, pileup, rarecount
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.target import Target
-from test_gap_dropout import OPTIONS, chosen, drop, dropout_in_set, saturation, stationary
+from test_gap_dropout import OPTIONS, chosen, closed, drop, dropout_in_set, saturation, \
+    stationary
 from test_gap_support import CONDITIONS, CONFIG, closed_loop_protocol, recorded, \
     stationary_protocol
 
@@ -73,6 +74,37 @@ def test_dropouts_beside_a_gain_are_added_at_forty_replicates():
     assert chosen(result)[0] == 'sensor_gain_offset'
     assert dropout_in_set(result)
     assert saturation(result)['sensors'] == [1, 4, 6]
+
+
+def test_dropouts_to_a_value_apart_from_every_other_reading_are_marked():
+    """A dark sensor (level 500, noise of +-10) whose light also moves: lost readings at
+    525 lie within six robust sds of the level and beside neighbours that move, but the
+    value stands apart from every reading the sensor gave otherwise.  Readings on a coarse
+    lattice, or a clean sensor, get no marks."""
+    rng = np.random.default_rng(8)
+    n = 6000
+    t = np.arange(n)
+    light = 500 - 250 * np.clip(np.sin(t / 7.0), 0, None) ** 4        # a lamp passing
+    clean = np.round(light[:, None] + rng.uniform(-10, 10, (n, 3)))
+    x = clean.copy()
+    lost = rng.random(n) < 0.02
+    x[lost, 0] = 525.0
+    x[:, 2] = np.round(clean[:, 1] / 16) * 16                          # a lattice
+    runs = np.split(t, np.arange(60, n, 60))
+    marks = dropout.repair(x, runs, moving=True)[1]
+    assert marks[:, 0, 1].sum() >= 0.9 * lost.sum()
+    assert np.all(lost[marks[:, 0, 1] > 0])
+    assert marks[:, 1:].sum() == 0
+    assert dropout.repair(clean, runs, moving=True)[1].sum() == 0
+
+
+def test_dropouts_to_the_top_of_the_scale_in_closed_loop_are_found():
+    """The robot spends its episodes in the dark (500), where 525 lies within the
+    noise's six robust sds: before, none were found."""
+    result = diagnose.diagnose([drop(closed(), (1, 4, 6), 0.02, 525.0)], OPTIONS)
+    assert saturation(result)['sensors'] == [1, 4, 6]
+    assert saturation(result)['parameters']['dropout_value'] == 525.0
+    assert dropout_in_set(result)
 
 
 # -- controls ---------------------------------------------------------------------------

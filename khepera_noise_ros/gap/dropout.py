@@ -40,6 +40,11 @@ STRETCHED = 0.25     # a value whose readings lie next to each other this often 
 WINDOW = tuple(k for k in range(-8, 9) if k)   # a quick sd from these neighbours ...
 QUICK = 0.75         # ... rules out, with a margin, readings the run's sd would (cheaper)
 FAMILIES = frozenset({'dropout', 'closed_loop_dropout'})
+# a value standing apart (``_detached``): this many readings at it, a gap to the next value
+# inward this many times the widest of the next SPACINGS gaps inward (and AWAY readings)
+DETACHED_HITS = 3
+DETACHED = 3.0
+SPACINGS = 10
 
 
 def hits(x: np.ndarray, runs: list, moving: bool = False) -> np.ndarray:
@@ -95,16 +100,24 @@ def repair(x: np.ndarray, runs: list,
     # noise tail's, near their neighbours; only what is left needs its run's scale
     at = np.concatenate([i for _, _, i in todo])
     k_at = np.concatenate([np.full(i.size, k) for k, _, i in todo])
-    near, lower, d = _local_test(x[order], at, k_at, run_of, first, sizes)
+    near, lower, d, level = _local_test(x[order], at, k_at, run_of, first, sizes)
     cols: dict = {}
     cuts = np.cumsum([i.size for *_, i in todo])[:-1]
-    for (k, end, i), keep, low, dist in zip(todo, *(np.split(v, cuts) for v in (near, lower, d))):
+    for (k, end, i), keep, low, dist, apart in zip(
+            todo, *(np.split(v, cuts) for v in (near, lower, d, level))):
+        # a value standing apart from all the sensor's other readings is no noise tail
+        # however wide the noise, nor a level a moving light reaches: its readings need
+        # only be isolated and ``AWAY`` from their neighbours
+        loose = (apart & ~keep).any() and _detached(x[:, k], end, hits[end], k)
+        if loose:
+            keep = apart
         if not keep.any():
             continue
         if k not in cols:
             cols[k] = x[order, k].astype(np.float64)
         i, low = i[keep], low[keep]
-        far = _scaled(cols[k], i, dist[keep], run_of, first, sizes)
+        far = np.ones(i.size, bool) if loose else \
+            _scaled(cols[k], i, dist[keep], run_of, first, sizes)
         out[order[i[far]], k, end] = 1.0
         if far.any():
             if repaired is x:
@@ -134,8 +147,8 @@ def _adjacent(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
 
 def _near_level(value: np.ndarray, around: np.ndarray) -> tuple:
     """(far: isolated and ``AWAY`` and ``STEADY`` times the neighbours' range from the
-    local level, the lower middle of the neighbours, the distance) of readings ``value``
-    (M,) with neighbours ``around`` (4, M)."""
+    local level, the lower middle of the neighbours, the distance, isolated and ``AWAY``)
+    of readings ``value`` (M,) with neighbours ``around`` (4, M)."""
     # neighbours at the same extreme (a second dropout next to this one) are left out
     # of the local level and of the neighbours' range
     around = np.where(around == value[None, :], np.nan, around.astype(np.float64))
@@ -148,8 +161,9 @@ def _near_level(value: np.ndarray, around: np.ndarray) -> tuple:
         warnings.simplefilter('ignore', RuntimeWarning)    # none left: not isolated
         rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
     with np.errstate(invalid='ignore'):
-        far = (count >= ISOLATED) & (d >= AWAY) & (d >= STEADY * rough)
-    return far, lower, d
+        alone = (count >= ISOLATED) & (d >= AWAY)
+        far = alone & (d >= STEADY * rough)
+    return far, lower, d, alone
 
 
 def _quick_spread(near: np.ndarray) -> np.ndarray:
@@ -171,8 +185,8 @@ def _flanked(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
 def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
     """(which of the readings at positions ``i`` of one channel ``col`` are isolated and
     far from their local level, the lower middle of their neighbours)."""
-    far, lower, d = _local_test(col[:, None], i, np.zeros(i.size, np.int64), run_of, first,
-                                sizes)
+    far, lower, d, _ = _local_test(col[:, None], i, np.zeros(i.size, np.int64), run_of,
+                                   first, sizes)
     if far.any():
         far[far] = _scaled(col, i[far], d[far], run_of, first, sizes)
     return far, lower
@@ -181,12 +195,36 @@ def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
 def _local_test(xo, at, k, run_of, first, sizes) -> tuple:
     """``_near_level`` of the readings at positions ``at`` of channels ``k`` (``xo``: samples
     run by run), then a quick robust sd from the ``WINDOW`` around those still far: it
-    rules out, with a margin, readings their run's scale would."""
-    far, lower, d = _near_level(xo[at, k], xo[_neighbours(run_of, first, sizes, NEAR, at), k])
+    rules out, with a margin, readings their run's scale would.  Returns (far by both,
+    the lower middle, the distance, isolated and ``AWAY`` from the local level)."""
+    far, lower, d, alone = _near_level(xo[at, k],
+                                       xo[_neighbours(run_of, first, sizes, NEAR, at), k])
     if far.any():
         near = xo[_neighbours(run_of, first, sizes, WINDOW, at[far]), k[far]]
         far[far] = d[far] >= QUICK * SPREADS * _quick_spread(near.astype(np.float64))
-    return far, lower, d
+    return far, lower, d, alone
+
+
+def _detached(col: np.ndarray, end: int, at_end: tuple, k: int) -> bool:
+    """Does channel ``k``'s extreme value (``end``) stand apart: at least ``DETACHED_HITS``
+    readings at it (``at_end``: the (channel, sample) hits at that end), and a gap to the
+    next value inward of ``AWAY`` readings and ``DETACHED`` times the widest gap between
+    the next ``SPACINGS`` distinct values inward?  A noise tail thins out value by value
+    and a lattice's gaps are all alike; readings lost to one value beyond the reach of
+    the noise (525 beside a dark level of 500 whose noise stops at 510) leave a gap."""
+    if np.count_nonzero(at_end[0] == k) < DETACHED_HITS:
+        return False
+    x = col[np.isfinite(col)]
+    x = x if end == 0 else -x
+    rest = x[x > x.min()]
+    m = min(rest.size, 64 * (SPACINGS + 1))
+    if m < SPACINGS + 1:
+        return False
+    near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
+    if near.size < 3:
+        return False
+    gap = near[0] - x.min()
+    return bool(gap >= AWAY and gap >= DETACHED * np.diff(near).max())
 
 
 def _scaled(col, i, d, run_of, first, sizes) -> np.ndarray:
