@@ -104,10 +104,14 @@ def recount(c: Comparison, real: dict, sim: dict) -> Comparison:
 
 
 def copies(target) -> int:
-    """Copies of the recordings simulated for the counts: ``COUNT_SAMPLES`` readings
-    per sensor (at most ``MAX_COPIES``, at least the comparison's own copies)."""
-    n = sum(len(r) for r in target.recordings)
-    return int(max(target.copies, min(MAX_COPIES, np.ceil(COUNT_SAMPLES / max(n, 1)))))
+    """Copies of the recordings simulated for the counts: the comparison's own when they
+    hold half of ``COUNT_SAMPLES`` readings per sensor (a long recording: a rare rate
+    gives many counts there, and more replays would cost time), else ``COUNT_SAMPLES``
+    readings (at most ``MAX_COPIES`` copies)."""
+    n = max(sum(len(r) for r in target.recordings), 1)
+    if n * target.copies >= COUNT_SAMPLES / 2:
+        return int(target.copies)
+    return int(max(target.copies, min(MAX_COPIES, np.ceil(COUNT_SAMPLES / n))))
 
 
 def compare(target, c: Comparison, effects=()) -> Comparison:
