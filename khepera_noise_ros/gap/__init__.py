@@ -17,6 +17,7 @@ effect explains it, and how far adding that effect shrinks the gap on held-out d
   spreadlaw   laws of the noise's spread against the level
   dropout     isolated readings at a sensor's extremes: marked, repaired, their statistics
   limits      dropouts counted against the simulator, for the fit
+  rarecount   dropout shares judged by an exact count test against many simulated copies
   compound    forward selection of a set of effects, each fitted jointly
   remainder   what the named effects leave, and its empirical model
   groups      dependence groups by clustering correlations
