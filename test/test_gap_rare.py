@@ -1,26 +1,18 @@
-"""Rare events: few dropouts (judged by an exact count test), and pile-ups at either end.
+"""Rare events: few dropouts, judged by an exact count test, and dropouts to a value apart.
 
 Recordings are made by the simulator (``test_gap_support``) and edited by hand: each
 reading of the chosen sensors, with probability ``rate``, reads ``value`` (a dropout).
-A pile-up is a ``saturation_quantization`` limit set by the robot's simulator.
 """
-import dataclasses
-
 import numpy as np
 import pytest
 
-from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.gap import diagnose, dropout, pileup, rarecount
+from khepera_noise_ros.gap import diagnose, dropout, rarecount
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.target import Target
 from test_gap_dropout import OPTIONS, chosen, closed, drop, dropout_in_set, saturation, \
     stationary
-from test_gap_support import CONDITIONS, CONFIG, closed_loop_protocol, recorded, \
-    stationary_protocol
+from test_gap_support import CONFIG, closed_loop_protocol, recorded
 
-NORMAL = dataclasses.replace(
-    CONFIG, noise=NoiseModel.independent_only(0.02, distribution='normal'))
-DIM = {k: v for k, v in CONDITIONS.items() if k != 'task'}
 GAIN = fx.SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0))
 
 
@@ -131,49 +123,3 @@ def test_limits_lattices_and_spread_laws_are_not_dropouts(robot):
     rows = [i for i, k in enumerate(c.keys) if k.family in rarecount.FAMILIES]
     assert rows and not c.significant()[rows].any()
     assert rarecount.copies(target) > target.copies          # judged by the counts
-
-
-# -- pile-ups at either end -------------------------------------------------------------
-
-def test_a_pile_at_either_end_stands_above_a_smooth_tail():
-    """Each end's pile is looked for among that end's own outermost readings; a clip at
-    3% of readings holds several times what a smooth tail holds there (before: the high
-    end borrowed the low end's count of values, and on a smooth tail the share looked at
-    reached inward to where the density is about that of a 3% pile)."""
-    rng = np.random.default_rng(4)
-    smooth = np.round(300 + 10 * rng.standard_normal((40000, 1)))
-    low, high = np.quantile(smooth, [0.03, 0.97])
-    for clipped, end, value in ((np.minimum(smooth, high), 1, high),
-                                (np.maximum(smooth, low), 0, low)):
-        assert pileup._piles(clipped[:, 0])[end] == value
-        real, sim = (pileup.edge_hits(x)[:, 0, end].mean() for x in (clipped, smooth))
-        assert real > 3.0 * sim, (end, real, sim)
-    # a lattice has no pile at either end
-    lattice = np.round(smooth / 4) * 4
-    share = pileup.edge_hits(lattice)[:, 0].mean(axis=0)
-    assert np.all(share < 0.02)
-
-
-def test_the_high_end_is_counted_from_the_high_end():
-    """A floor holding many readings at one value, a ceiling holding 1.5% with a few
-    strays beyond it: the high pile is the mode of the high end's own outermost
-    readings, the ceiling (before, the high end looked at as many values as the low
-    end's 2% held, here one: the outermost stray)."""
-    rng = np.random.default_rng(5)
-    x = np.round(300 + 40 * rng.standard_normal(6000))
-    x = np.clip(x, np.quantile(x, 0.05).round(), np.quantile(x, 0.985).round())
-    floor, ceiling = x.min(), x.max()
-    x[:3] = ceiling + np.array([20.0, 30.0, 40.0])             # strays beyond the ceiling
-    assert pileup._piles(x) == (floor, ceiling)
-    assert pileup.edge_hits(x[:, None])[:, 0, 1].mean() > 0.014
-
-
-@pytest.mark.parametrize('seed', range(10))
-def test_clean_recordings_show_no_pile(seed):
-    """Ten clean recordings of the pile-up tests' protocol (3,600 samples, normal noise):
-    no pile-up statistic differs (before, seed 3 had one at the high end)."""
-    rec = recorded(stationary_protocol(samples=150, conditions=DIM), (), config=NORMAL,
-                   seed=seed)
-    c = Target([rec], NORMAL, 0, replicates=40).compare()
-    rows = [i for i, k in enumerate(c.keys) if k.family == 'pileup']
-    assert not c.significant()[rows].any()

@@ -17,11 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 ENDS = ('at the lowest reading', 'at the highest reading')
-# The pile statistic looks for a pile in this share of readings at each end, counted from
-# that end.  On a smooth tail the mode of the share looked at is its innermost value, whose
-# window holds about three values' density there: the share must be narrower than the
-# piles to be found (a few percent), or that density is as large as the pile.
-TAIL = 0.01
+TAIL = 0.02         # the pile statistic looks for a pile in this share of readings at each end
 WIDTH = 1.0         # and counts the readings this close to it
 # A limit at value v (see the module's docstring): the simulator puts EXPECTED readings
 # beyond v (none are real: a chance of exp(-5) without a limit); the real readings at v
@@ -60,10 +56,9 @@ def _piles(x: np.ndarray) -> tuple:
         values = np.flatnonzero(counts)
         counts = counts[values]
         cum = np.cumsum(counts)
-        tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)       # values, each end
-        top = max(1, int(np.searchsorted(np.cumsum(counts[::-1]), TAIL * cum[-1])) + 1)
+        tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)
         return (float(values[np.argmax(counts[:tail])] + low),
-                float(values[values.size - 1 - np.argmax(counts[::-1][:top])] + low))
+                float(values[values.size - 1 - np.argmax(counts[::-1][:tail])] + low))
     k = max(1, int(np.ceil(TAIL * x.size)))
     if 2 * k >= x.size:
         values, counts = np.unique(x, return_counts=True)
