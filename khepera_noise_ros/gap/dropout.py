@@ -10,7 +10,9 @@ readings before and the two after it in the same episode: by ``AWAY`` readings, 
 a heading change and a closed-loop robot's turns; the robust sd grows with a spread
 law or a group's shared noise beside it; a gain moves a run's level, not its single
 readings.  A floor or ceiling, or a lamp's saturation, holds readings at the extreme
-for stretches: such a value is a limit, not a dropout value.
+for stretches: such a value is a limit, not a dropout value.  A value standing apart
+from every other reading of the sensor (``_detached``) is beyond the noise's reach
+however wide it is, so its isolated readings need only lie ``AWAY`` from their level.
 
 ``repair`` marks them and reads each as its neighbours' level; ``prepared`` does so once
 per recording (``Target`` and its simulations) and remembers the marks.  The gap
