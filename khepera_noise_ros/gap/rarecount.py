@@ -8,8 +8,9 @@ over hundreds of statistics calls chance.  Here the count is compared exactly: g
 the total count of both sides, the real one is binomial with the real side's share of
 the readings under "same rate" (the conditional test for two Poisson rates), and the
 simulated side gets many more readings (``COUNT_SAMPLES``) so that its rate is known
-well.  The test's p-value gives the statistic's z, and its error bar is the difference
-over that z (the pooled count's own, with a floor of one count, where they agree), so
+well (only when there are real events and the comparison's own copies give few
+simulated ones).  The test's p-value gives the statistic's z, and its error bar is the
+difference over that z (the pooled count's own, floored at one count, where they agree), so
 the discrepancy, the held-out reduction and the bootstrap replicates see the count as
 the count model does.  Zero on both sides is no evidence either way (z 0).
 """
@@ -27,6 +28,8 @@ from .where import Z_CAP, Comparison
 FAMILIES = dropout.FAMILIES
 COUNT_SAMPLES = 48_000      # simulated readings per sensor aimed at for the counts
 MAX_COPIES = 20             # ... with at most this many copies of the recordings
+KNOWN = 20                  # simulated events that make the simulator's rate known
+EVENTS = 2                  # real events that more simulated copies can make evidence of
 
 
 def counts(recordings: list) -> dict:
@@ -120,13 +123,23 @@ def compare(target, c: Comparison, effects=()) -> Comparison:
     comparison's own replays when those are as many)."""
     if not any(k.family in FAMILIES for k in c.keys):
         return c
+    real, own = counts(target.recordings), counts(target.simulate(effects))
     k = copies(target)
-    if k == target.copies:
-        sims = target.simulate(effects)
-    else:       # not through the replay cache: the fitters' replays stay in it
-        effects = tuple(target.given) + tuple(effects)
-        sims = [dropout.prepared(replay.replay(rec, target.config, effects,
-                                               seed=target.seed + 7919 * i, replicates=k,
-                                               base=target.base))
-                for i, rec in enumerate(target.recordings)]
-    return recount(c, counts(target.recordings), counts(sims))
+    if k == target.copies or not _undecided(real, own):
+        return recount(c, real, own)
+    # not through the replay cache: the fitters' replays stay in it
+    effects = tuple(target.given) + tuple(effects)
+    sims = [dropout.prepared(replay.replay(rec, target.config, effects,
+                                           seed=target.seed + 7919 * i, replicates=k,
+                                           base=target.base))
+            for i, rec in enumerate(target.recordings)]
+    return recount(c, real, counts(sims))
+
+
+def _undecided(real: dict, sim: dict) -> bool:
+    """Do the comparison's own copies leave a count to be judged on more: ``EVENTS`` or more
+    real events beside fewer than ``KNOWN`` simulated ones?  Fewer real events are no
+    evidence however many copies (one against none at 1:20 is z 1.7, inside the
+    discrepancy's margin of 2); with many simulated ones their rate is known already."""
+    return any(r >= EVENTS and sim[key][0] < KNOWN for key, (r, _) in real.items()
+               if key in sim)
