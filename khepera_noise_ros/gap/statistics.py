@@ -127,9 +127,15 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
     run_order, run_starts, run_sizes = lay['run_at']
-    run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
-    y = np.empty_like(x)
-    y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
+    if 'runs_sorted' not in lay:     # samples already in run order (a replay's are)
+        lay['runs_sorted'] = bool(np.array_equal(run_order, np.arange(len(rec))))
+    if lay['runs_sorted']:
+        run_means = np.add.reduceat(x, run_starts, axis=0) / run_sizes[:, None]
+        y = x - np.repeat(run_means, run_sizes, axis=0)
+    else:
+        run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
+        y = np.empty_like(x)
+        y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
     if 'sorted' not in lay:     # samples already in block order (a replay's are)
         lay['sorted'] = bool(order.size == len(rec) and
                              np.array_equal(order, np.arange(order.size)))
@@ -140,14 +146,11 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
     y32 = yo.astype(np.float32)
-    upper = np.triu_indices(len(channels))
-    s2 = np.zeros((nb, len(channels), len(channels)))
-    s2[:, upper[0], upper[1]] = _block_sum(block, blockcounts.upper_products(y32), nb)
-    s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
+    # cross products: the upper triangle only (``_cross`` fills in the rest after summing)
     parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
              's1': _block_sum(block, yo, nb),
-             's2': s2,
+             's2': _block_sum(block, blockcounts.upper_products(y32), nb),
              's4': _block_sum(block, np.square(np.square(y32)), nb)}
     parts['lag_n'], parts['lag_s'] = _lagged(lay, y32, nb)
     integer = bool(np.all(x == np.round(x)))
@@ -174,7 +177,9 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
                                       nb)
         parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
-    parts['dropped'] = _block_sum(block, inorder(dropped), nb)
+    # no dropout marks (most replays): their block sums are zeros, no need to add them
+    parts['dropped'] = _block_sum(block, inorder(dropped), nb) if dropped.any() else \
+        np.zeros((nb,) + dropped.shape[1:])
     parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
     if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
         lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
@@ -352,7 +357,7 @@ def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stat
 
 def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
     n = b.part(sums, 'n')[..., 0]                            # (R, S)
-    s1, s2 = b.part(sums, 's1'), b.part(sums, 's2')
+    s1, s2 = b.part(sums, 's1'), _cross(b.part(sums, 's2'), len(b.channels))
     level = b.part(sums, 'sx') / n[..., None]                 # (R, S, C)
     centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
     cell_var = np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1)
@@ -400,6 +405,17 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
         cols.append(frac.reshape(r, -1))
     keys = _stationary_keys(tuple(b.strata), tuple(ch), timed, bool(b.extra['integer']))
     return Stats(keys, np.concatenate(cols, axis=1))
+
+
+def _cross(upper: np.ndarray, channels: int) -> np.ndarray:
+    """(..., C, C) symmetric sums of cross products from their upper triangle (..., C (C +
+    1) / 2) in ``np.triu_indices`` order: each sum below the diagonal is the same sum of
+    the same products as its mirror above, so copying it is exact."""
+    out = np.zeros(upper.shape[:-1] + (channels, channels))
+    i, j = np.triu_indices(channels)
+    out[..., i, j] = upper
+    out[..., j, i] = upper
+    return out
 
 
 @functools.lru_cache(maxsize=64)

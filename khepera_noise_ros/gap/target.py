@@ -58,6 +58,7 @@ class Target:
                                          self.seed + i)
                       for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
         self.real = _join(self._real)
+        self._objectives = {}     # objective values, shared with ``with_given`` copies
 
     def _chosen(self, kinds) -> list[int]:
         return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
@@ -185,7 +186,23 @@ class Target:
                   limits=False) -> float:
         """The discrepancy with ``effects`` added, from simulated estimates only, over the
         recordings of ``kinds`` and the statistics of ``families`` (None: all but those
-        in ``LIMITS_ONLY`` unless ``limits``)."""
+        in ``LIMITS_ONLY`` unless ``limits``).  A deterministic function of its arguments
+        and the target (common random numbers), so each value is computed once: a
+        bounded search asks for the same clipped, rounded parameters again."""
+        key = (id(self.real), self.seed, self.config, self.base, self.copies,
+               tuple(self.block_lengths), tuple(self.given) + tuple(effects), kinds,
+               None if families is None else frozenset(families), margin, limits)
+        memo = self._objectives
+        try:
+            return memo[key]
+        except KeyError:
+            pass
+        except TypeError:           # an unhashable parameter: computed every time
+            return self._objective(effects, kinds, families, margin, limits)
+        memo[key] = value = self._objective(effects, kinds, families, margin, limits)
+        return value
+
+    def _objective(self, effects, kinds, families, margin, limits) -> float:
         real = self._real_of(kinds)
         copies = self._objective_copies()
         sim, factor = self._simulated(effects, 0, kinds, copies)
