@@ -159,9 +159,9 @@ def test_cross_products_from_the_triangle_equal_the_full_block_sums():
     tri = blocks.layout['s2'][0]
     wide = np.concatenate([blocks.sums[:, :tri.start], mirrored.reshape(len(mirrored), -1),
                            blocks.sums[:, tri.stop:]], axis=1)
-    layout = {k: ((slice(v[0].start + c * c - (tri.stop - tri.start),
-                         v[0].stop + c * c - (tri.stop - tri.start)), v[1])
-                   if v[0].start >= tri.stop else v) for k, v in blocks.layout.items()}
+    shift = c * c - (tri.stop - tri.start)
+    layout = {k: (slice(w.start + shift, w.stop + shift), shape) if w.start >= tri.stop
+              else (w, shape) for k, (w, shape) in blocks.layout.items()}
     layout['s2'] = (slice(tri.start, tri.start + c * c), (c, c))
     wide_blocks = statistics.Blocks('stationary', blocks.channels, blocks.strata,
                                     blocks.stratum, wide, layout, blocks.extra)
