@@ -91,8 +91,8 @@ def repair(x: np.ndarray, runs: list,
     # noise tail's, near their neighbours; only what is left needs its run's scale
     at = np.concatenate([i for _, _, i in todo])
     k_at = np.concatenate([np.full(i.size, k) for k, _, i in todo])
-    near, lower, d = _local_test(x[order], at, k_at, run_of, first, sizes)
-    cols: dict = {}       # per channel: its readings run by run, their distances from
+    near, lower, d = _local_test(x, at, k_at, run_of, first, sizes, order)
+    cols: dict = {}       # per channel: readings run by run, distances from local levels
     cuts = np.cumsum([i.size for *_, i in todo])[:-1]
     for (k, end, i), keep, low, dist in zip(todo, *(np.split(v, cuts) for v in (near, lower, d))):
         if not keep.any():
@@ -175,13 +175,17 @@ def _far(col, i, run_of, first, sizes) -> tuple[np.ndarray, np.ndarray]:
     return far, lower
 
 
-def _local_test(xo, at, k, run_of, first, sizes) -> tuple:
+def _local_test(xo, at, k, run_of, first, sizes, order=None) -> tuple:
     """``_near_level`` of the readings at positions ``at`` of channels ``k`` (``xo``: samples
-    run by run), then a quick robust sd from the ``WINDOW`` around those still far: it
-    rules out, with a margin, readings their run's scale would."""
-    far, lower, d = _near_level(xo[at, k], xo[_neighbours(run_of, first, sizes, NEAR, at), k])
+    run by run, or in any order with ``order`` the samples run by run: only the readings
+    asked for are gathered), then a quick robust sd from the ``WINDOW`` around those
+    still far: it rules out, with a margin, readings their run's scale would."""
+    def rows(p):
+        return p if order is None else order[p]
+    far, lower, d = _near_level(xo[rows(at), k],
+                                xo[rows(_neighbours(run_of, first, sizes, NEAR, at)), k])
     if far.any():
-        near = xo[_neighbours(run_of, first, sizes, WINDOW, at[far]), k[far]]
+        near = xo[rows(_neighbours(run_of, first, sizes, WINDOW, at[far])), k[far]]
         far[far] = d[far] >= QUICK * SPREADS * _quick_spread(near.astype(np.float64))
     return far, lower, d
 
