@@ -7,7 +7,7 @@ the computation it replaces, bit for bit.  Speed is ``benchmark/bench_diagnose.p
 """
 import numpy as np
 
-from khepera_noise_ros.gap import dropout, ownwander, statistics, target
+from khepera_noise_ros.gap import dropout, ownwander, resample, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import pack
 from test_gap_support import CONFIG, recorded, stationary_protocol
@@ -220,3 +220,39 @@ def test_a_remembered_replay_is_the_repaired_replay(monkeypatch):
     assert np.array_equal(sim.readings, repaired)
     assert np.array_equal(dropout.known(sim.readings)[0], marks)
     assert not sim.readings.flags.writeable
+
+
+def test_lagged_products_of_shifted_rows_equal_the_gathered_pairs():
+    rec = recorded(stationary_protocol(samples=15), [fx.TemporalDrift((0, 2), 0.03, 5.0)])
+    shortcut = statistics.stationary_blocks(rec, rec.channels_used, 5)
+    lay = statistics._layout(rec, 5)
+    assert all(s is not None for s in lay['lag_shifts'])     # the shortcut was taken
+    kept = lay['lag_shifts']
+    lay['lag_shifts'] = [None] * len(kept)
+    try:
+        general = statistics.stationary_blocks(rec, rec.channels_used, 5)
+    finally:
+        lay['lag_shifts'] = kept
+    assert np.array_equal(shortcut.sums, general.sums)
+    # blocks longer than numpy adds in order keep the gathered pairs
+    statistics.stationary_blocks(rec, rec.channels_used, statistics.SEQUENTIAL + 1)
+    long_blocks = statistics._layout(rec, statistics.SEQUENTIAL + 1)
+    assert all(s is None for s in long_blocks['lag_shifts'])
+
+
+def test_remembered_selection_matrix_gives_the_sums_of_fresh_weights():
+    recs = [recorded(stationary_protocol(samples=12), [fx.SensorLatency((1,), 1)], seed=s)
+            for s in (1, 2)]
+    resample._PICKS.clear()
+    for rec in recs:        # the second recording's blocks meet the first one's matrix
+        blocks = statistics.stationary_blocks(rec, rec.channels_used, 4)
+        for replicates, seed in ((40, 3), (40, 4), (7, 3)):
+            w = statistics.weights(blocks, replicates, np.random.default_rng(seed))
+            assert np.array_equal(resample.resampled(blocks, replicates, seed),
+                                  statistics.stratum_sums(blocks, w))
+    assert len(resample._PICKS) == 3
+    bad = statistics.stationary_blocks(recs[0], recs[0].channels_used, 4)
+    bad.sums[0, 0] = np.inf              # a sum not finite: undrawn blocks are kept
+    w = statistics.weights(bad, 40, np.random.default_rng(3))
+    assert np.array_equal(resample.resampled(bad, 40, 3),
+                          statistics.stratum_sums(bad, w), equal_nan=True)
