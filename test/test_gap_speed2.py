@@ -256,3 +256,27 @@ def test_remembered_selection_matrix_gives_the_sums_of_fresh_weights():
     w = statistics.weights(bad, 40, np.random.default_rng(3))
     assert np.array_equal(resample.resampled(bad, 40, 3),
                           statistics.stratum_sums(bad, w), equal_nan=True)
+
+
+def test_drift_on_every_sensor_in_place_equals_the_gathered_columns():
+    level = np.random.default_rng(4).uniform(50, 500, (120, 8, 3))
+    for shared in (True, False):
+        drift = fx.TemporalDrift(tuple(range(8)), 0.02, 12.0, shared)
+        out = drift.over_time(level, np.random.default_rng(9))
+        rng = np.random.default_rng(9)
+        z = rng.standard_normal((120, 1 if shared else 8, 3))
+        a = np.exp(-1.0 / 12.0)
+        z[0] *= 0.02
+        z[1:] *= np.sqrt(1 - a * a) * 0.02
+        state = np.zeros_like(z)
+        state[0] = z[0]
+        for t in range(1, 120):
+            state[t] = a * state[t - 1] + z[t]
+        plain = level.copy()
+        plain[:, list(range(8))] *= 1.0 + state
+        assert np.allclose(out, plain, rtol=1e-12, atol=0)
+        reordered = fx.TemporalDrift(tuple(range(7, -1, -1)), 0.02, 12.0, shared)
+        back = reordered.over_time(level, np.random.default_rng(9))
+        plain = level.copy()
+        plain[:, list(range(7, -1, -1))] *= 1.0 + state
+        assert np.allclose(back, plain, rtol=1e-12, atol=0)
