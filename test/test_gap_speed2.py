@@ -280,3 +280,18 @@ def test_drift_on_every_sensor_in_place_equals_the_gathered_columns():
         plain = level.copy()
         plain[:, list(range(7, -1, -1))] *= 1.0 + state
         assert np.allclose(back, plain, rtol=1e-12, atol=0)
+
+
+def test_columns_of_every_channel_are_the_readings_and_marks_unchanged():
+    rec = recorded(stationary_protocol(samples=12),
+                   [fx.SaturationQuantization((2,), dropout=0.05, dropout_value=0.0)])
+    ready = dropout.prepared(rec)
+    every = tuple(range(rec.readings.shape[1]))
+    x, marks = dropout.columns(ready, every)
+    assert np.array_equal(x, ready.readings.astype(np.float64)) and marks.sum() > 0
+    assert np.array_equal(marks, dropout.known(ready.readings)[0])
+    some, some_marks = dropout.columns(ready, (2, 0))
+    assert np.array_equal(some, ready.readings[:, [2, 0]])
+    assert np.array_equal(some_marks, dropout.known(ready.readings)[0][:, [2, 0]])
+    fresh = dropout.repair(rec.readings.astype(np.float64), dropout.episodes(rec))
+    assert np.array_equal(x, fresh[0]) and np.array_equal(marks, fresh[1])

@@ -288,11 +288,14 @@ def episodes(rec) -> list:
 
 def columns(rec, channels) -> tuple[np.ndarray, np.ndarray]:
     """(readings of ``channels`` as float, repaired, and their dropout marks): those
-    ``prepared`` remembered, else found now."""
-    x = rec.readings[:, list(channels)].astype(np.float64, copy=False)   # a copy already
+    ``prepared`` remembered, else found now.  For every channel in order, the arrays
+    themselves where they are float already (no copy: read them, do not write)."""
+    every = list(channels) == list(range(rec.readings.shape[1]))
+    cols = slice(None) if every else list(channels)
+    x = rec.readings[:, cols].astype(np.float64, copy=False)
     done = known(rec.readings)
     if done is not None:
-        return x, done[0][:, list(channels)]
+        return x, done[0][:, cols]
     return repair(x, episodes(rec))[:2]
 
 
