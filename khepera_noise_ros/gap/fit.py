@@ -38,9 +38,9 @@ from .where import ALPHA, Comparison, holm
 
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
-# The drift's search: later steps gained less than the objective's own noise between
-# simulator seeds (docs/diagnosis.md, "Speed of the long recording")
-DRIFT_EVALUATIONS = 10
+# The drift's search: 16 objectives, 10 in the box the own wander bounds (there the
+# later steps gained less than the objective's noise between simulator seeds)
+DRIFT_EVALUATIONS = (16, 10)
 
 
 def _channels(target: Target) -> list[int]:
@@ -331,7 +331,8 @@ def drift(target: Target, c: Comparison) -> Candidate:
         return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
                       method='Nelder-Mead', options={
-                          'maxfev': DRIFT_EVALUATIONS, 'initial_simplex': [
+                          'maxfev': DRIFT_EVALUATIONS[bool(own and not moved)],
+                          'initial_simplex': [
                               [math.log(sd0), math.log(tau0)],
                               [math.log(sd0 * 1.6), math.log(tau0)],
                               [math.log(sd0), math.log(tau0 * 2.0)]]})
