@@ -7,7 +7,7 @@ the computation it replaces, bit for bit.  Speed is ``benchmark/bench_diagnose.p
 """
 import numpy as np
 
-from khepera_noise_ros.gap import dropout, ownwander, resample, statistics, target
+from khepera_noise_ros.gap import dropout, fit, ownwander, resample, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import pack
 from test_gap_support import CONFIG, recorded, stationary_protocol
@@ -295,3 +295,27 @@ def test_columns_of_every_channel_are_the_readings_and_marks_unchanged():
     assert np.array_equal(some_marks, dropout.known(ready.readings)[0][:, [2, 0]])
     fresh = dropout.repair(rec.readings.astype(np.float64), dropout.episodes(rec))
     assert np.array_equal(x, fresh[0]) and np.array_equal(marks, fresh[1])
+
+
+def test_drift_search_in_the_own_wander_box_stops_within_the_objectives_noise(monkeypatch):
+    """10 objectives where the own wander bounds the search: the answer's objective lies
+    within the objective's spread between simulator seeds of the 16-objective answer's."""
+    flicker = fx.IntensityDependentNoise(tuple(range(8)), 0.06, 2.0, 525.0, 0.0, 'dark', True)
+    truth = fx.TemporalDrift((0, 2, 3, 5, 6), 0.01, 40.0, False)
+    rec = recorded(stationary_protocol(samples=120), [truth, flicker], seed=11)
+    t = target.Target([rec], CONFIG, 3, 'auto', replicates=40).with_given([flicker])
+    c = t.compare(replicates=40)
+    asked = []
+    plain = fit.minimize
+    monkeypatch.setattr(fit, 'minimize', lambda f, x0, **kw: asked.append(
+        kw['options']['maxfev']) or plain(f, x0, **kw))
+    short = fit.drift(t, c)
+    monkeypatch.setattr(fit, 'DRIFT_EVALUATIONS', (16, 16))
+    full = fit.drift(t, c)
+    assert asked == [10, 16] and short.effect is not None and full.effect is not None
+    spread = []
+    for k in range(1, 5):
+        other = target.copy.copy(t)
+        other.seed = t.seed + 1000 * k
+        spread.append(other.objective([full.effect]))
+    assert abs(t.objective([short.effect]) - t.objective([full.effect])) <= np.std(spread)
