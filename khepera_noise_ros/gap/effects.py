@@ -101,7 +101,8 @@ class TemporalDrift(_OnSensors):
         z[1:] *= np.sqrt(1 - a * a) * self.sd
         state = lfilter([1.0], [1.0, -a], z, axis=0)
         out = level.copy()
-        out[:, rows] *= 1.0 + state
+        cols = slice(None) if rows == list(range(level.shape[1])) else rows    # a view
+        out[:, cols] *= 1.0 + state
         return out
 
 

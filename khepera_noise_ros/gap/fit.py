@@ -38,6 +38,9 @@ from .where import ALPHA, Comparison, holm
 
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
+# The drift's search: 16 objectives, 10 in the box the own wander bounds (there the
+# later steps gained less than the objective's noise between simulator seeds)
+DRIFT_EVALUATIONS = (16, 10)
 
 
 def _channels(target: Target) -> list[int]:
@@ -327,9 +330,12 @@ def drift(target: Target, c: Comparison) -> Candidate:
         tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *bounds[1]))
         return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
-                      method='Nelder-Mead', options={'maxfev': 16, 'initial_simplex': [
-                          [math.log(sd0), math.log(tau0)], [math.log(sd0 * 1.6), math.log(tau0)],
-                          [math.log(sd0), math.log(tau0 * 2.0)]]})
+                      method='Nelder-Mead', options={
+                          'maxfev': DRIFT_EVALUATIONS[bool(own and not moved)],
+                          'initial_simplex': [
+                              [math.log(sd0), math.log(tau0)],
+                              [math.log(sd0 * 1.6), math.log(tau0)],
+                              [math.log(sd0), math.log(tau0 * 2.0)]]})
     effect = make(result.x)
     if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
         other = make(result.x, not shared)

@@ -23,9 +23,37 @@ LAGS = (1, 3, 10)
 SKIP = 3               # first samples of a run left out: the step after a heading change
 MIN_RUN = 24           # shorter runs give no usable autocorrelation at the longest lag
 MIN_LEVEL = 20.0       # readings; darker cells carry no usable own part (rounding)
+OWN_CACHE = 64
 
 
-def _own(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+_OWN: dict = {}
+
+
+def _own(rec, shared_by=None, memo=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_own_parts``, remembered per recording and ``shared_by`` (read-only): the sensors
+    are taken out one at a time (``wandering``), and every fit of a drift asks again of
+    the same real recordings and often of the same remembered replay.  Read-only readings
+    (a replay's) are remembered here; others only in ``memo``, a dict of whoever keeps
+    them unchanged (a ``Target``)."""
+    cols = (rec.readings, rec.episode, rec.step, rec.heading_deg, rec.condition)
+    cache = _OWN if not rec.readings.flags.writeable else memo
+    if cache is None:
+        return _own_parts(rec, shared_by)
+    key = tuple(id(c) for c in cols) + (tuple(rec.channels_used),
+                                        None if shared_by is None else tuple(shared_by))
+    hit = cache.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], cols)):
+        return hit[1]
+    out = _own_parts(rec, shared_by)
+    for a in out:
+        a.flags.writeable = False
+    cache[key] = (cols, out)          # the columns held: their identities stay unique
+    if len(cache) > OWN_CACHE:
+        cache.pop(next(iter(cache)))
+    return out
+
+
+def _own_parts(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Arrays over runs: (runs, lags, sensors) autocorrelation of each sensor's own part
     at ``LAGS``, (runs, sensors) its lag-1 autocovariance relative to the level, and
     (runs, sensors) a usable mask.  The shared part is the mean of the other sensors
@@ -60,12 +88,12 @@ def _own(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(acf), np.array(cov), np.array(ok)
 
 
-def _pooled(recs, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    parts = [_own(rec, shared_by) for rec in recs]
+def _pooled(recs, shared_by=None, memo=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    parts = [_own(rec, shared_by, memo) for rec in recs]
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
 
 
-def excess(real: list, sim: list, shared_by=None) -> dict:
+def excess(real: list, sim: list, shared_by=None, memo=None) -> dict:
     """{sensor: {'z', 'p' (of the mean over ``LAGS``), 'acf' {lag: real - simulated},
     'sd' (the wander's sd as a fraction of the level, from the excess lag-1
     autocovariance)}} of every sensor in the stationary recordings ``real`` against
@@ -73,7 +101,7 @@ def excess(real: list, sim: list, shared_by=None) -> dict:
     if not real or not sim:
         return {}
     used = list(real[0].channels_used)
-    (ar, cr, okr), (as_, cs, oks) = _pooled(real, shared_by), _pooled(sim, shared_by)
+    (ar, cr, okr), (as_, cs, oks) = _pooled(real, shared_by, memo), _pooled(sim, shared_by)
     out = {}
     for k, s in enumerate(used):
         x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
@@ -91,7 +119,7 @@ def excess(real: list, sim: list, shared_by=None) -> dict:
     return out
 
 
-def wandering(real: list, sim: list) -> dict:
+def wandering(real: list, sim: list, memo=None) -> dict:
     """The sensors of ``excess`` whose own part is more autocorrelated than simulated
     (one-sided, Holm over the sensors tested at ``ALPHA``).
 
@@ -105,7 +133,7 @@ def wandering(real: list, sim: list) -> dict:
     used = list(real[0].channels_used)
     shared_by, found = list(range(len(used))), {}
     while len(shared_by) >= 2:
-        ex = excess(real, sim, shared_by)
+        ex = excess(real, sim, shared_by, memo)
         left = _significant({s: v for s, v in ex.items() if used.index(s) in shared_by})
         if not left:
             break
@@ -132,4 +160,6 @@ def of_target(target) -> dict:
     real = target.of_kind('stationary')
     if not real:
         return {}
-    return wandering(real, target.simulate(kinds=('stationary',)))
+    # the target's recordings do not change: their own parts are remembered with it
+    memo = target.__dict__.setdefault('_own_parts', {})
+    return wandering(real, target.simulate(kinds=('stationary',)), memo)

@@ -18,12 +18,12 @@ import functools
 from collections import OrderedDict
 
 import numpy as np
-from scipy import sparse
 
 from ..recording import Recording
 from . import blockcounts, blocklength, dropout, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
+from .resample import resampled, stratum_sums, weights  # noqa: F401 (re-exported)
 
 LAGS = (1, 3)                    # autocorrelation lags, in steps
 MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity family
@@ -127,9 +127,15 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     # residuals about each run's own mean: the same small bias for real and simulated
     # runs alike (runs partition the samples; sums in sample order, as ``mean`` adds)
     run_order, run_starts, run_sizes = lay['run_at']
-    run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
-    y = np.empty_like(x)
-    y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
+    if 'runs_sorted' not in lay:     # samples already in run order (a replay's are)
+        lay['runs_sorted'] = bool(np.array_equal(run_order, np.arange(len(rec))))
+    if lay['runs_sorted']:
+        run_means = np.add.reduceat(x, run_starts, axis=0) / run_sizes[:, None]
+        y = x - np.repeat(run_means, run_sizes, axis=0)
+    else:
+        run_means = np.add.reduceat(x[run_order], run_starts, axis=0) / run_sizes[:, None]
+        y = np.empty_like(x)
+        y[run_order] = x[run_order] - np.repeat(run_means, run_sizes, axis=0)
     if 'sorted' not in lay:     # samples already in block order (a replay's are)
         lay['sorted'] = bool(order.size == len(rec) and
                              np.array_equal(order, np.arange(order.size)))
@@ -140,14 +146,11 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
     y32 = yo.astype(np.float32)
-    upper = np.triu_indices(len(channels))
-    s2 = np.zeros((nb, len(channels), len(channels)))
-    s2[:, upper[0], upper[1]] = _block_sum(block, blockcounts.upper_products(y32), nb)
-    s2 = s2 + np.triu(s2, 1).transpose(0, 2, 1)         # symmetric: half the products
+    # cross products: the upper triangle only (``_cross`` fills in the rest after summing)
     parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
              'sx': _block_sum(block, xo, nb),
              's1': _block_sum(block, yo, nb),
-             's2': s2,
+             's2': _block_sum(block, blockcounts.upper_products(y32), nb),
              's4': _block_sum(block, np.square(np.square(y32)), nb)}
     parts['lag_n'], parts['lag_s'] = _lagged(lay, y32, nb)
     integer = bool(np.all(x == np.round(x)))
@@ -174,7 +177,9 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
                                       nb)
         parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
-    parts['dropped'] = _block_sum(block, inorder(dropped), nb)
+    # no dropout marks (most replays): their block sums are zeros, no need to add them
+    parts['dropped'] = _block_sum(block, inorder(dropped), nb) if dropped.any() else \
+        np.zeros((nb,) + dropped.shape[1:])
     parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
     if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
         lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
@@ -267,13 +272,40 @@ def _lagged(lay: dict, y: np.ndarray, blocks: int) -> tuple[np.ndarray, np.ndarr
         lay['lag_segments'] = [(np.bincount(lay['block'][hit], minlength=blocks),
                                 _segments(lay['block'][hit], blocks))
                                for hit, _ in lay['lags']]
+    if 'lag_shifts' not in lay:     # each partner ``lag`` rows on: products of shifted rows
+        lay['lag_shifts'] = [_shifted(lay, hit, partner, lag)
+                             for lag, (hit, partner) in zip(LAGS, lay['lags'])]
     counts = np.zeros((blocks, len(LAGS)))
     sums = np.zeros((blocks, len(LAGS), y.shape[1]))
-    for li, ((hit, partner), (count, segments)) in enumerate(zip(lay['lags'],
-                                                                 lay['lag_segments'])):
+    for li, ((hit, partner), (count, segments), shift) in enumerate(zip(
+            lay['lags'], lay['lag_segments'], lay['lag_shifts'])):
         counts[:, li] = count
-        sums[:, li] = _block_sum(segments, y[hit] * y[partner], blocks)
+        if shift is None:
+            sums[:, li] = _block_sum(segments, y[hit] * y[partner], blocks)
+        else:       # the same products, zeros between them: the same sums (x + 0 is x)
+            lag, kept, block_segments = shift
+            product = np.zeros_like(y)
+            np.multiply(y[:-lag], y[lag:], out=product[:-lag], where=kept[:, None])
+            sums[:, li] = _block_sum(block_segments, product, blocks)
     return counts, sums
+
+
+SEQUENTIAL = 8    # numpy adds a block of at most this many rows one by one, in order
+
+
+def _shifted(lay: dict, hit: np.ndarray, partner: np.ndarray, lag: int):
+    """(lag, which of the first N - lag rows have their partner, the blocks' segments)
+    when every partner lies ``lag`` rows after its sample, else None; then a row's
+    product can be made in place, unmoved.  Only for blocks numpy sums one row after
+    another (at most ``SEQUENTIAL`` rows; longer ones it sums pairwise, eight at a time,
+    and the zeros between the products would move the pairs)."""
+    n = hit.size
+    at = np.flatnonzero(hit)
+    largest = int(np.bincount(lay['block']).max()) if lay['block'].size else 0
+    if largest > SEQUENTIAL or n <= lag or not np.array_equal(partner, at + lag) \
+            or hit[n - lag:].any():
+        return None
+    return lag, hit[:n - lag].copy(), lay['segments']
 
 
 def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
@@ -281,69 +313,9 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
     return _closed_loop_blocks(rec, perturb_every)
 
 
-# -- resampling ---------------------------------------------------------------------------
-
-def weights(blocks: Blocks, replicates: int, rng: np.random.Generator) -> np.ndarray:
-    """(1 + R, B) block weights: the full data, then stratified bootstrap draws."""
-    b = blocks.stratum.size
-    codes = []
-    for lo, hi in zip(blocks.edges[:-1], blocks.edges[1:]):
-        if replicates and hi > lo:
-            picks = rng.integers(lo, hi, size=(replicates, hi - lo))
-            codes.append((np.arange(1, replicates + 1)[:, None] * b + picks).ravel())
-    w = np.bincount(np.concatenate(codes), minlength=(1 + replicates) * b) if codes else \
-        np.zeros((1 + replicates) * b)
-    w = w.reshape(1 + replicates, b).astype(np.float64)
-    w[0] = 1.0
-    return w
-
-
-def stratum_sums(blocks: Blocks, w: np.ndarray) -> np.ndarray:
-    """(R, S, D) weighted sums of each stratum's blocks."""
-    r, b = w.shape
-    strata = len(blocks.strata)
-    if r == 1 and np.all(w == 1.0):       # the full data alone (fits): plain sums in block
-        out = np.zeros((strata, blocks.sums.shape[1]))      # order, as the product adds
-        lo = blocks.edges[:-1]
-        used = blocks.edges[1:] > lo
-        if used.any():
-            out[used] += np.add.reduceat(blocks.sums, lo[used], axis=0)
-        return out[None]
-    # Blocks are sorted by stratum.  Rows of the selection matrix are (stratum, replicate),
-    # each holding that stratum's blocks in order, so a stratum's sums stay in cache while
-    # its replicates are added up (the same products, added in the same order, as with
-    # rows by replicate); built directly in CSR form.  Blocks a replicate did not draw
-    # (weight 0, a third of them) are left out: adding 0 x a finite sum changes nothing,
-    # so only when every sum is finite.
-    flat, col, rows = _stratum_major(tuple(blocks.edges.tolist()), r)
-    data = np.take(w.ravel(), flat)
-    if np.isfinite(blocks.sums.sum()):      # a finite total: every sum is finite
-        drawn = data != 0.0
-        data, col, rows = data[drawn], col[drawn], rows[drawn]
-    indptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=r * strata))]
-    pick = sparse.csr_matrix((data, col, indptr), shape=(r * strata, b))
-    out = np.asarray(pick @ blocks.sums).reshape(strata, r, -1)
-    return np.ascontiguousarray(out.transpose(1, 0, 2))
-
-
-@functools.lru_cache(maxsize=8)
-def _stratum_major(edges: tuple, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(position in the (r, B) weights, block, row) of every weight, stratum by stratum,
-    replicate by replicate (the row is stratum x r + replicate)."""
-    b = edges[-1]
-    flat, col, rows = [], [], []
-    for s, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-        rep = np.repeat(np.arange(r), hi - lo)
-        col.append(np.tile(np.arange(lo, hi), r))
-        flat.append(rep * b + col[-1])
-        rows.append(s * r + rep)
-    return np.concatenate(flat), np.concatenate(col), np.concatenate(rows)
-
-
 def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stats:
     """All statistics of ``blocks``, full data first, then ``replicates`` resamples."""
-    w = weights(blocks, replicates, np.random.default_rng(seed))
-    sums = stratum_sums(blocks, w)
+    sums = resampled(blocks, replicates, seed)
     with np.errstate(invalid='ignore', divide='ignore'):
         if blocks.kind == 'stationary':
             return _stationary_stats(blocks, sums)
@@ -352,7 +324,7 @@ def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stat
 
 def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
     n = b.part(sums, 'n')[..., 0]                            # (R, S)
-    s1, s2 = b.part(sums, 's1'), b.part(sums, 's2')
+    s1, s2 = b.part(sums, 's1'), _cross(b.part(sums, 's2'), len(b.channels))
     level = b.part(sums, 'sx') / n[..., None]                 # (R, S, C)
     centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
     cell_var = np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1)
@@ -400,6 +372,17 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
         cols.append(frac.reshape(r, -1))
     keys = _stationary_keys(tuple(b.strata), tuple(ch), timed, bool(b.extra['integer']))
     return Stats(keys, np.concatenate(cols, axis=1))
+
+
+def _cross(upper: np.ndarray, channels: int) -> np.ndarray:
+    """(..., C, C) symmetric sums of cross products from their upper triangle (..., C (C +
+    1) / 2) in ``np.triu_indices`` order: each sum below the diagonal is the same sum of
+    the same products as its mirror above, so copying it is exact."""
+    out = np.zeros(upper.shape[:-1] + (channels, channels))
+    i, j = np.triu_indices(channels)
+    out[..., i, j] = upper
+    out[..., j, i] = upper
+    return out
 
 
 @functools.lru_cache(maxsize=64)

@@ -58,6 +58,7 @@ class Target:
                                          self.seed + i)
                       for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
         self.real = _join(self._real)
+        self._objectives = {}     # objective values, shared with ``with_given`` copies
 
     def _chosen(self, kinds) -> list[int]:
         return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
@@ -69,9 +70,8 @@ class Target:
     def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
-        return [dropout.prepared(_replay(self.recordings[i], self.config, effects,
-                                         self.seed + 7919 * i, copies, self.base))
-                for i in self._chosen(kinds)]
+        return [_replay(self.recordings[i], self.config, effects, self.seed + 7919 * i,
+                        copies, self.base) for i in self._chosen(kinds)]
 
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]
@@ -186,7 +186,23 @@ class Target:
                   limits=False) -> float:
         """The discrepancy with ``effects`` added, from simulated estimates only, over the
         recordings of ``kinds`` and the statistics of ``families`` (None: all but those
-        in ``LIMITS_ONLY`` unless ``limits``)."""
+        in ``LIMITS_ONLY`` unless ``limits``).  A deterministic function of its arguments
+        and the target (common random numbers), so each value is computed once: a
+        bounded search asks for the same clipped, rounded parameters again."""
+        key = (id(self.real), self.seed, self.config, self.base, self.copies,
+               tuple(self.block_lengths), tuple(self.given) + tuple(effects), kinds,
+               None if families is None else frozenset(families), margin, limits)
+        memo = self._objectives
+        try:
+            return memo[key]
+        except KeyError:
+            pass
+        except TypeError:           # an unhashable parameter: computed every time
+            return self._objective(effects, kinds, families, margin, limits)
+        memo[key] = value = self._objective(effects, kinds, families, margin, limits)
+        return value
+
+    def _objective(self, effects, kinds, families, margin, limits) -> float:
         real = self._real_of(kinds)
         copies = self._objective_copies()
         sim, factor = self._simulated(effects, 0, kinds, copies)
@@ -247,19 +263,23 @@ REPLAY_CACHE = 16
 
 def _replay(rec: Recording, config: SimConfig, effects: tuple, seed: int, copies: int,
             base: str) -> Recording:
-    """``replay.replay``, remembered: a replay is a deterministic function of the recording,
-    the configuration, the effects, the seed and the copies, and the fitters ask for the
-    same one again (the simulator with the chosen effects and nothing more).  A replay
-    given out is read-only, since it is shared."""
+    """``replay.replay`` with its dropouts repaired (``dropout.prepared``), remembered: a
+    replay is a deterministic function of the recording, the configuration, the effects,
+    the seed and the copies, and the fitters ask for the same one again (the simulator
+    with the chosen effects and nothing more).  A replay given out is read-only, since
+    it is shared."""
     key = (id(rec), config, effects, seed, copies, base)
     try:
         hit = _REPLAYS.get(key)
     except TypeError:           # an unhashable parameter: replay it every time
-        return replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+        return dropout.prepared(replay.replay(rec, config, effects, seed=seed,
+                                              replicates=copies, base=base))
     if hit is not None and hit[0] is rec:
         _REPLAYS.move_to_end(key)
         return hit[1]
-    sim = replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+    raw = replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+    raw.readings.flags.writeable = False
+    sim = dropout.prepared(raw)       # repaired once, not again when asked again
     sim.readings.flags.writeable = False
     _REPLAYS[key] = (rec, sim)
     if len(_REPLAYS) > REPLAY_CACHE:
