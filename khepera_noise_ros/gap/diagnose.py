@@ -240,7 +240,7 @@ def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_bef
     other rounding every candidate is scored again."""
     best = scored[0][2] if scored and scored[0][1] is not None else None
     given = [best] if best is not None else []
-    choice = rounding.choose(a, given, o.alpha)
+    choice = rounding.choose(a, given, o.reduction_alpha)
     if choice['rounding'] != a.config.noise.rounding:
         b2 = rounding.retarget(b, choice['rounding'])
         held = {choice['given']: rounding.lattice(b, scored[0][1] if given else
