@@ -148,10 +148,21 @@ def diagnosis(config, recs, label: str) -> None:
     chosen = j['compound']['chosen'] if j['compound'] else []
     print(f'  {label}: gap significant {r.gap_significant}; top {r.top_effect}; best '
           f'{best}')
-    steps = [f'{c["name"]} {c["cumulative_reduction"]:.3f}' for c in chosen]
+    if j.get('rounding'):
+        print(f'    rounding: {j["rounding"]["note"]}')
+    steps = [f'{c["name"]}{_where(c)} {c["cumulative_reduction"]:.3f}' for c in chosen]
     print('    compound: ' + ' -> '.join(steps)
           + (f'; rejected {j["compound"]["rejected"]}' if j['compound'] else '')
           + f'  [{time.process_time() - t0:.1f} s CPU]')
+
+
+def _where(step: dict) -> str:
+    """' (groups ...)' for shared noise, ' (s3, s4)' for effects on some sensors."""
+    if 'groups' in step['parameters']:
+        return f' (groups {step["parameters"]["groups"]})'
+    sensors = step['sensors']
+    return '' if not sensors or len(sensors) == 8 else \
+        ' (' + ', '.join(f's{k}' for k in sensors) + ')'
 
 
 def main(argv=None) -> int:
