@@ -213,6 +213,9 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                 result.compound = compound.select(
                     a, b, (best_effect, best['note'], best_cmp, scored[0][3]), o.effects,
                     d_before, before_reps, result.held_out_before)
+                if o.rounding and len(result.compound.effects) > 1 and \
+                        result.rounding['rounding'] == result.rounding['given']:
+                    a, b = _late_rounding(result, a, b, candidates, d_before, before_reps, o)
                 result.held_out_after = result.compound.comparison
                 result.combined = {'effects': [e.name for e in result.compound.effects],
                                    'discrepancy_before': d_before,
@@ -234,22 +237,23 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
 
 
 def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_before: float,
-              before_reps, o: Options) -> tuple:
+              before_reps, o: Options, given=None) -> tuple:
     """(a, b, scored) with the rounding the fitting part's value lattice prefers given the
-    best effect (``gap.rounding``), confirmed on the held-out part's lattice; with the
-    other rounding every candidate is scored again."""
-    best = scored[0][2] if scored and scored[0][1] is not None else None
-    given = [best] if best is not None else []
+    best effect (or ``given``; ``gap.rounding``), confirmed on the held-out part's
+    lattice; with the other rounding every candidate is scored again."""
+    if given is None:
+        best = scored[0][2] if scored and scored[0][1] is not None else None
+        given = [best] if best is not None else []
     choice = rounding.choose(a, given, o.reduction_alpha)
     if choice['rounding'] != a.config.noise.rounding:
         b2 = rounding.retarget(b, choice['rounding'])
-        held = {choice['given']: rounding.lattice(b, scored[0][1] if given else
-                                                  result.held_out_before)[0],
+        held = {choice['given']: rounding.lattice(b, b.compare(given))[0],
                 choice['rounding']: rounding.lattice(b2, b2.compare(given))[0]}
         choice['lattice_held_out'] = held
         if held[choice['rounding']] >= held[choice['given']]:
             choice['note'] += '; not confirmed on the held-out part: the given is kept'
             choice['rounding'] = choice['given']
+    choice['given_effects'] = [e.name for e in given]
     result.rounding = choice
     if choice['rounding'] == a.config.noise.rounding:
         return a, b, scored
@@ -258,6 +262,28 @@ def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_bef
     scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
     scored.sort(key=lambda s: -s[0]['heldout_reduction'])
     return a, b, _parsimonious(scored, o.alpha)
+
+
+def _late_rounding(result: Diagnosis, a: Target, b: Target, candidates, d_before: float,
+                   before_reps, o: Options) -> tuple:
+    """The rounding asked again given the whole compound (a best effect that is a proxy
+    leaves the spreads too far off for the lattice to tell); when it changes, the
+    compound is chosen again from the same top effect under the new rounding."""
+    early = result.rounding
+    a2, b2, scored = _rounding(result, a, b, candidates, [], d_before, before_reps, o,
+                               list(result.compound.effects))
+    result.rounding['early'] = {k: early[k] for k in ('rounding', 'lattice', 'p_value')}
+    if a2 is a:
+        return a, b
+    top = next(s for s in scored if s[0]['name'] == result.top_effect)
+    if top[1] is None:          # the top effect cannot run under the other rounding
+        result.rounding['rounding'] = result.rounding['given']
+        return a, b
+    result.effects = [s[0] for s in scored]
+    result.compound = compound.select(a2, b2, (top[2], top[0]['note'], top[1], top[3]),
+                                      o.effects, d_before, before_reps, result.held_out_before)
+    result.fitted = top[2]
+    return a2, b2
 
 
 def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:
