@@ -213,12 +213,13 @@ def test_on_the_emulated_robot_the_simulator_rounds_the_reading_as_the_robot_doe
     assert result.simulator(SimConfig()).noise.rounding == 'reading'
 
 
-@pytest.mark.xfail(strict=True, reason='with the simulator rounding at the reading the '
-                   'group noise (0.3%) lowers the held-out discrepancy with its true '
-                   'parameters (+22, sd 15, at 60 samples per heading: under the size rules; '
-                   'chosen at 240), but the drift (0.4%) raises it at every size from 60 to '
-                   '1,200 samples (benchmark/emulated_set.py --rounding reading; '
-                   'docs/diagnosis.md, Limitations)')
+@pytest.mark.xfail(strict=True, reason='with the simulator rounding at the reading (chosen '
+                   'by the diagnosis) the group noise (0.3%) lowers the held-out discrepancy '
+                   'with its true parameters, but by +22 (sd 15) at 60 samples per heading, '
+                   'under the size rules; from 240 it is significant and taken by one group '
+                   'of all eight sensors standing in for the flicker; the drift\'s (0.4%) '
+                   'true parameters raise the discrepancy at 60 to 1,200 samples '
+                   '(benchmark/emulated_set.py; docs/diagnosis.md, Limitations)')
 def test_the_emulated_robots_default_effects_are_found_as_a_set(emulated):
     config, result = emulated
     names = {c['name'] for c in result.to_json()['compound']['chosen']}
