@@ -215,7 +215,7 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                     d_before, before_reps, result.held_out_before)
                 if o.rounding and len(result.compound.effects) > 1 and \
                         result.rounding['rounding'] == result.rounding['given']:
-                    a, b = _late_rounding(result, a, b, candidates, d_before, before_reps, o)
+                    a, b = _late_rounding(result, a, b, d_before, o)
                 result.held_out_after = result.compound.comparison
                 result.combined = {'effects': [e.name for e in result.compound.effects],
                                    'discrepancy_before': d_before,
@@ -240,8 +240,10 @@ def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_bef
               before_reps, o: Options, given=None) -> tuple:
     """(a, b, scored) with the rounding the fitting part's value lattice prefers given the
     best effect (or ``given``; ``gap.rounding``), confirmed on the held-out part's
-    lattice; with the other rounding every candidate is scored again."""
-    if given is None:
+    lattice; with the other rounding every candidate is scored again (not when
+    ``given`` is the compound: ``_late_rounding``)."""
+    late = given is not None
+    if not late:
         best = scored[0][2] if scored and scored[0][1] is not None else None
         given = [best] if best is not None else []
     choice = rounding.choose(a, given, o.reduction_alpha)
@@ -257,32 +259,40 @@ def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_bef
     result.rounding = choice
     if choice['rounding'] == a.config.noise.rounding:
         return a, b, scored
-    result.notes.append(choice['note'])
     a, b = rounding.retarget(a, choice['rounding']), b2
-    scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
-    scored.sort(key=lambda s: -s[0]['heldout_reduction'])
-    return a, b, _parsimonious(scored, o.alpha)
+    if not late:
+        result.notes.append(choice['note'])
+        scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
+        scored.sort(key=lambda s: -s[0]['heldout_reduction'])
+        scored = _parsimonious(scored, o.alpha)
+    return a, b, scored
 
 
-def _late_rounding(result: Diagnosis, a: Target, b: Target, candidates, d_before: float,
-                   before_reps, o: Options) -> tuple:
-    """The rounding asked again given the whole compound (a best effect that is a proxy
-    leaves the spreads too far off for the lattice to tell); when it changes, the
-    compound is chosen again from the same top effect under the new rounding."""
-    early = result.rounding
-    a2, b2, scored = _rounding(result, a, b, candidates, [], d_before, before_reps, o,
-                               list(result.compound.effects))
-    result.rounding['early'] = {k: early[k] for k in ('rounding', 'lattice', 'p_value')}
+def _late_rounding(result: Diagnosis, a: Target, b: Target, d_before: float,
+                   o: Options) -> tuple:
+    """The rounding asked again given the whole compound (a best effect that is a stand-in
+    leaves the spreads too far off for the lattice to tell).  On a change the chosen
+    effects are kept and scored again under it, and it is kept only if their held-out
+    discrepancy falls (choosing the compound again would double the diagnosis's time)."""
+    early = {k: result.rounding[k] for k in ('rounding', 'lattice', 'p_value')}
+    effects = list(result.compound.effects)
+    a2, b2, _ = _rounding(result, a, b, [], [], d_before, None, o, effects)
+    result.rounding['early'] = early
     if a2 is a:
         return a, b
-    top = next(s for s in scored if s[0]['name'] == result.top_effect)
-    if top[1] is None:          # the top effect cannot run under the other rounding
+    after = b2.compare(effects)
+    c = result.compound
+    if after.discrepancy >= c.discrepancy_after:
         result.rounding['rounding'] = result.rounding['given']
+        result.rounding['note'] += (f'; the chosen effects\' held-out discrepancy does not '
+                                    f'fall ({c.discrepancy_after:.1f} to '
+                                    f'{after.discrepancy:.1f}): the given is kept')
         return a, b
-    result.effects = [s[0] for s in scored]
-    result.compound = compound.select(a2, b2, (top[2], top[0]['note'], top[1], top[3]),
-                                      o.effects, d_before, before_reps, result.held_out_before)
-    result.fitted = top[2]
+    result.rounding['note'] += (f'; the chosen effects\' held-out discrepancy '
+                                f'{c.discrepancy_after:.1f} -> {after.discrepancy:.1f}')
+    result.notes.append(result.rounding['note'])
+    c.comparison, c.discrepancy_after = after, after.discrepancy
+    c.replicates = b2.replicate_discrepancies(after)
     return a2, b2
 
 
