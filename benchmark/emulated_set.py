@@ -2,6 +2,7 @@
 
     python benchmark/emulated_set.py [--samples 60] [--episodes 30] [--seed 3]
                                      [--oracle-only] [--diagnose-only]
+                                     [--rounding level|reading]
 
 Recordings as test/test_gap_compound.py records them (stationary, ``--samples`` per
 heading and condition; closed loop, ``--episodes`` episodes, headings unknown).
@@ -12,6 +13,9 @@ oracle     the robot's own effects, with their true parameters, put into the
            An effect whose absence raises nothing beyond the noise cannot be found.
 diagnose   the diagnosis of the robot with one effect alone, and with every default
            effect but one: the single best effect and the compound chosen.
+
+``--rounding`` is where the simulator rounds the reading ('level': the paper's,
+the default; 'reading': noise added to the unrounded level, as the robot does).
 """
 from __future__ import annotations
 
@@ -46,8 +50,12 @@ def recordings(config, seed: int, samples: int, episodes: int) -> list:
             record_closed_loop(world, np.array(GENOME), episodes=episodes, seed=seed)]
 
 
-def simulator(config) -> SimConfig:
-    return SimConfig(noise=NoiseModel.independent_only(config.sensor_noise))
+ROUNDING = ['level']        # the simulator's rounding (set by --rounding)
+
+
+def simulator(config, rounding: str | None = None) -> SimConfig:
+    return SimConfig(noise=NoiseModel.independent_only(config.sensor_noise,
+                                                       rounding=rounding or ROUNDING[0]))
 
 
 def true_effects(config) -> dict:
@@ -140,10 +148,21 @@ def diagnosis(config, recs, label: str) -> None:
     chosen = j['compound']['chosen'] if j['compound'] else []
     print(f'  {label}: gap significant {r.gap_significant}; top {r.top_effect}; best '
           f'{best}')
-    steps = [f'{c["name"]} {c["cumulative_reduction"]:.3f}' for c in chosen]
+    if j.get('rounding'):
+        print(f'    rounding: {j["rounding"]["note"]}')
+    steps = [f'{c["name"]}{_where(c)} {c["cumulative_reduction"]:.3f}' for c in chosen]
     print('    compound: ' + ' -> '.join(steps)
           + (f'; rejected {j["compound"]["rejected"]}' if j['compound'] else '')
           + f'  [{time.process_time() - t0:.1f} s CPU]')
+
+
+def _where(step: dict) -> str:
+    """' (groups ...)' for shared noise, ' (s3, s4)' for effects on some sensors."""
+    if 'groups' in step['parameters']:
+        return f' (groups {step["parameters"]["groups"]})'
+    sensors = step['sensors']
+    return '' if not sensors or len(sensors) == 8 else \
+        ' (' + ', '.join(f's{k}' for k in sensors) + ')'
 
 
 def main(argv=None) -> int:
@@ -154,13 +173,15 @@ def main(argv=None) -> int:
     p.add_argument('--sim-seeds', type=int, default=1)
     p.add_argument('--oracle-only', action='store_true')
     p.add_argument('--diagnose-only', action='store_true')
+    p.add_argument('--rounding', choices=('level', 'reading'), default='level')
     p.add_argument('--effects', nargs='*', default=None,
                    help='effects to study alone and left out (default: every enabled one; none '
                         'given: none)')
     a = p.parse_args(argv)
+    ROUNDING[0] = a.rounding
     robot_config = EffectsConfig.real_robot()
     print(f'recordings: {a.samples} samples per cell, {a.episodes} closed-loop episodes, '
-          f'seed {a.seed}')
+          f'seed {a.seed}; simulator rounding {a.rounding}')
     recs = recordings(robot_config, a.seed, a.samples, a.episodes)
     if not a.diagnose_only:
         print('oracle (true parameters) on the default robot:')

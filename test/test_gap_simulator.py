@@ -78,7 +78,7 @@ def test_the_simulator_node_loads_the_written_params_file(tmp_path):
         context.try_shutdown()
     assert values == {'noise_model': 'combination', 'dependent_level': 0.045,
                       'independent_level': 0.015, 'dependence_groups': '2,3',
-                      'distribution': 'normal'}
+                      'distribution': 'normal', 'rounding': 'level'}
 
 
 def test_transfer_gap_is_zero_when_reality_is_the_simulator_and_reported_both_ways():

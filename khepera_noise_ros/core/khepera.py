@@ -63,15 +63,17 @@ class World:
         drop = np.where(a < np.radians(self.half_angle_deg), np.cos(1.5 * a) * near * self.gain, 0)
         return np.maximum(self.ambient - drop, self.floor)
 
-    def light_table(self) -> np.ndarray:
-        """Every sensor's integer reading at every bearing of the grid.
+    def light_table(self, rounded: bool = True) -> np.ndarray:
+        """Every sensor's integer reading at every bearing of the grid (``rounded=False``:
+        the light level itself, for noise added before rounding).
 
         Returns:
             (SENSORS, TENTHS) float32, column ``to_tenths(bearing)``.
         """
         bearing = np.arange(TENTHS) / 10.0
         rel = bearing[None, :] - np.asarray(SENSOR_ANGLES_DEG)[:, None]
-        return np.rint(self.response(rel)).astype(np.float32)
+        level = self.response(rel)
+        return (np.rint(level) if rounded else level).astype(np.float32)
 
     @property
     def tenths_per_power(self) -> int:

@@ -10,6 +10,10 @@ value, to an *independent* draw per sensor:
 
 Draws arrive as 16-bit integers (see ``streams``) so that a uniform and a
 normal model consume the same randomness.
+
+``rounding`` says where the reading becomes an integer: 'level' (the paper's:
+integer noise added to an integer light level) or 'reading' (real noise added to
+the unrounded light level, rounded and clipped once, as a converter does).
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ from .streams import UNIT
 
 MODELS = ('none', 'independent', 'combination')
 DISTRIBUTIONS = ('uniform', 'normal')
+ROUNDINGS = ('level', 'reading')
 DEFAULT_GROUPS = ((0, 1, 2, 3, 4, 5), (6, 7))
 _SQRT3 = np.float32(np.sqrt(3.0))
 
@@ -57,6 +62,7 @@ class NoiseModel:
     independent: float = 0.02
     groups: tuple = field(default=DEFAULT_GROUPS)
     distribution: str = 'uniform'
+    rounding: str = 'level'
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -64,6 +70,8 @@ class NoiseModel:
         if self.distribution not in DISTRIBUTIONS:
             raise ValueError(f'distribution must be one of {DISTRIBUTIONS}, '
                              f'got {self.distribution!r}')
+        if self.rounding not in ROUNDINGS:
+            raise ValueError(f'rounding must be one of {ROUNDINGS}, got {self.rounding!r}')
         for name in ('dependent', 'independent'):
             level = getattr(self, name)
             if not isinstance(level, (int, float, np.floating)) or not np.isfinite(level) \
@@ -92,7 +100,8 @@ class NoiseModel:
 
         Sensor-major, like the stream draws it consumes (one row per stream channel): the
         batch-first (B, SENSORS) readings that ``Episodes`` hands out are a view of this
-        result (docs/architecture.md).
+        result (docs/architecture.md).  With ``rounding='reading'`` the sum is rounded
+        here, once.
 
         Args:
             base: (SENSORS, B) noise-free readings.
@@ -103,6 +112,14 @@ class NoiseModel:
         Returns:
             (SENSORS, B) float32 readings.
         """
+        out = self.added(base, sensor_draws, group_draws, out=out)
+        if self.rounding == 'reading':
+            np.rint(out, out=out)
+        return np.clip(out, 0.0, DARK, out=out)
+
+    def added(self, base: np.ndarray, sensor_draws: np.ndarray,
+              group_draws: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``base`` plus the noise, neither rounded nor clipped (``apply``'s arguments)."""
         d, i = self.levels
         dnoise = None
         if d > 0 and self.groups:   # group averages come from the base, before any noise
@@ -116,10 +133,11 @@ class NoiseModel:
         if dnoise is not None:
             for members, shared in zip(_indexers(self.groups), dnoise):
                 out[members] += shared
-        return np.clip(out, 0.0, DARK, out=out)
+        return out
 
     def _part(self, v: np.ndarray, p: float, draws: np.ndarray) -> np.ndarray:
-        """getnoise(v, p) for every element, computed in place in float32."""
+        """getnoise(v, p) for every element, computed in place in float32 (not truncated
+        when the reading is rounded at the end: the noise is the analogue signal's)."""
         if self.distribution == 'uniform':
             x = draws.astype(np.float32)
             x *= np.float32(2.0 * p / UNIT)     # 2*p*realrand() ...
@@ -128,7 +146,7 @@ class NoiseModel:
             x = gaussian(draws)
             x *= np.float32(p) / _SQRT3
         x *= v
-        return np.trunc(x, out=x)
+        return x if self.rounding == 'reading' else np.trunc(x, out=x)
 
     def sample(self, base, rng: np.random.Generator, samples: int = 1) -> np.ndarray:
         """Readings of fixed base values, for plots and checks.

@@ -137,6 +137,7 @@ class Episodes:
         self._world = world
         # bearing-major: a robot's 8 readings are one 32-byte row, one index per robot
         self._table = np.ascontiguousarray(world.light_table().T)
+        self._levels = None       # the unrounded table, made when a noise model asks for it
 
     @property
     def robots(self) -> int:
@@ -195,7 +196,7 @@ class Episodes:
         if self.step_index % WRAP_EVERY == 0:
             self._bearing %= TENTHS
         # 'wrap' costs a compare per robot where a modulo every step cost a division
-        rows = np.take(self._table, self._bearing, axis=0, mode='wrap')
+        rows = np.take(self._light_table(), self._bearing, axis=0, mode='wrap')
         # The hot path's one change of orientation.  The look-up gives each robot's 8
         # readings as a row; the noise, the network and the fitness work sensor by sensor,
         # so the readings are laid out sensor-major once, here, and handed out as a
@@ -204,6 +205,14 @@ class Episodes:
         base = np.empty(rows.shape[::-1], rows.dtype)
         base[...] = rows.T
         return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base).T
+
+    def _light_table(self) -> np.ndarray:
+        """The integer table, or the light levels when the noise rounds the reading."""
+        if getattr(self.noise, 'rounding', 'level') != 'reading':
+            return self._table
+        if self._levels is None:
+            self._levels = np.ascontiguousarray(self.world.light_table(rounded=False).T)
+        return self._levels
 
 
 @dataclass

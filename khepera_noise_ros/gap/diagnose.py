@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recording import Recording
 from . import effects as fx
-from . import allan, compound, fit, remainder, replay, split, transfer
+from . import allan, compound, fit, remainder, replay, rounding, split, transfer
 from .compound import PARAMETERS, TIE   # the parsimony rule's table, shared with the steps
 from .simconfig import SimConfig
 from .target import Target
@@ -47,6 +47,7 @@ class Options:
     where_limit: int = 40
     compound: bool = True         # forward selection of a set of effects after the best one
     remainder: bool = True        # describe what is left and fit the empirical model
+    rounding: bool = True         # choose where the simulator rounds from the value lattice
 
 
 @dataclass
@@ -68,6 +69,7 @@ class Diagnosis:
     remainder: dict | None = None    # what the named effects leave (held out), empirical model
     empirical: object | None = None  # the empirical model, when it brings the simulator closer
     allan: dict | None = None        # Allan deviation profiles, real and simulated (gap.allan)
+    rounding: dict | None = None     # where the simulator rounds, as chosen (gap.rounding)
 
     @property
     def fitted_effects(self) -> list:
@@ -75,6 +77,12 @@ class Diagnosis:
         if self.compound is not None:
             return list(self.compound.effects)
         return [] if self.fitted is None else [self.fitted]
+
+    def simulator(self, config: SimConfig) -> SimConfig:
+        """``config`` with the rounding the diagnosis chose (what fitted_params.yaml has)."""
+        if not self.rounding:
+            return config
+        return rounding.with_rounding(config, self.rounding['rounding'])
 
     def to_json(self) -> dict:
         """diagnosis.json: the fixed keys of format 1 plus this project's additions.
@@ -91,7 +99,7 @@ class Diagnosis:
                 'localisation': self.localisation,
                 'compound': None if self.compound is None else self.compound.to_json(),
                 'remainder': self.remainder,
-                'allan': self.allan,
+                'allan': self.allan, 'rounding': self.rounding,
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -192,6 +200,8 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
     scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
     scored.sort(key=lambda s: -s[0]['heldout_reduction'])
     scored = _parsimonious(scored, o.alpha)
+    if significant and o.rounding:
+        a, b, scored = _rounding(result, a, b, candidates, scored, d_before, before_reps, o)
     result.effects = [s[0] for s in scored]
     best, best_cmp, best_effect, _ = scored[0] if scored else (None, None, None, None)
     if significant and best is not None:
@@ -203,6 +213,9 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
                 result.compound = compound.select(
                     a, b, (best_effect, best['note'], best_cmp, scored[0][3]), o.effects,
                     d_before, before_reps, result.held_out_before)
+                if o.rounding and len(result.compound.effects) > 1 and \
+                        result.rounding['rounding'] == result.rounding['given']:
+                    a, b = _late_rounding(result, a, b, d_before, o)
                 result.held_out_after = result.compound.comparison
                 result.combined = {'effects': [e.name for e in result.compound.effects],
                                    'discrepancy_before': d_before,
@@ -221,6 +234,66 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
         result.transfer = _transfer(recordings, o, result.fitted, reality, transfer_trials,
                                     transfer_ea)
     return result
+
+
+def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_before: float,
+              before_reps, o: Options, given=None) -> tuple:
+    """(a, b, scored) with the rounding the fitting part's value lattice prefers given the
+    best effect (or ``given``; ``gap.rounding``), confirmed on the held-out part's
+    lattice; with the other rounding every candidate is scored again (not when
+    ``given`` is the compound: ``_late_rounding``)."""
+    late = given is not None
+    if not late:
+        best = scored[0][2] if scored and scored[0][1] is not None else None
+        given = [best] if best is not None else []
+    choice = rounding.choose(a, given, o.reduction_alpha)
+    if choice['rounding'] != a.config.noise.rounding:
+        b2 = rounding.retarget(b, choice['rounding'])
+        held = {choice['given']: rounding.lattice(b, b.compare(given))[0],
+                choice['rounding']: rounding.lattice(b2, b2.compare(given))[0]}
+        choice['lattice_held_out'] = held
+        if held[choice['rounding']] >= held[choice['given']]:
+            choice['note'] += '; not confirmed on the held-out part: the given is kept'
+            choice['rounding'] = choice['given']
+    choice['given_effects'] = [e.name for e in given]
+    result.rounding = choice
+    if choice['rounding'] == a.config.noise.rounding:
+        return a, b, scored
+    a, b = rounding.retarget(a, choice['rounding']), b2
+    if not late:
+        result.notes.append(choice['note'])
+        scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
+        scored.sort(key=lambda s: -s[0]['heldout_reduction'])
+        scored = _parsimonious(scored, o.alpha)
+    return a, b, scored
+
+
+def _late_rounding(result: Diagnosis, a: Target, b: Target, d_before: float,
+                   o: Options) -> tuple:
+    """The rounding asked again given the whole compound (a best effect that is a stand-in
+    leaves the spreads too far off for the lattice to tell).  On a change the chosen
+    effects are kept and scored again under it, and it is kept only if their held-out
+    discrepancy falls (choosing the compound again would double the diagnosis's time)."""
+    early = {k: result.rounding[k] for k in ('rounding', 'lattice', 'p_value')}
+    effects = list(result.compound.effects)
+    a2, b2, _ = _rounding(result, a, b, [], [], d_before, None, o, effects)
+    result.rounding['early'] = early
+    if a2 is a:
+        return a, b
+    after = b2.compare(effects)
+    c = result.compound
+    if after.discrepancy >= c.discrepancy_after:
+        result.rounding['rounding'] = result.rounding['given']
+        result.rounding['note'] += (f'; the chosen effects\' held-out discrepancy does not '
+                                    f'fall ({c.discrepancy_after:.1f} to '
+                                    f'{after.discrepancy:.1f}): the given is kept')
+        return a, b
+    result.rounding['note'] += (f'; the chosen effects\' held-out discrepancy '
+                                f'{c.discrepancy_after:.1f} -> {after.discrepancy:.1f}')
+    result.notes.append(result.rounding['note'])
+    c.comparison, c.discrepancy_after = after, after.discrepancy
+    c.replicates = b2.replicate_discrepancies(after)
+    return a2, b2
 
 
 def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:

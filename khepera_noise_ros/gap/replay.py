@@ -42,9 +42,10 @@ def kind(rec: Recording) -> str:
 
 
 @functools.lru_cache(maxsize=64)
-def light_table(world: World) -> np.ndarray:
-    """The world's light table, computed once per world."""
-    return world.light_table()
+def light_table(world: World, rounded: bool = True) -> np.ndarray:
+    """The world's light table, computed once per world (unrounded for a noise model that
+    rounds the reading at the end)."""
+    return world.light_table(rounded)
 
 
 def condition_world(rec: Recording, label: str, base: World) -> World:
@@ -201,7 +202,8 @@ def _light(rec: Recording, config: SimConfig, mode: str) -> tuple:
     length = int(rec.step.max()) + 1
     light = np.full((length, rec.channels, episodes.size), np.nan)
     if mode == 'model':
-        tables = {label: light_table(condition_world(rec, label, config.world))
+        rounded = config.noise.rounding == 'level'
+        tables = {label: light_table(condition_world(rec, label, config.world), rounded)
                   for label in rec.conditions()}
         for label, table in tables.items():
             at = rec.condition == label

@@ -29,6 +29,7 @@ def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {'diagnosis': write_json(out / 'diagnosis.json', diagnosis.to_json())}
+    config = diagnosis.simulator(config)     # with the rounding the diagnosis chose
     fitted = diagnosis.fitted_effects
     if fitted:
         names = ', '.join(e.name for e in fitted)

@@ -3,7 +3,7 @@
 The file is the one the simulator node loads with ``--ros-args --params-file``:
 ``{node: {ros__parameters: {...}}}`` with the node's parameter names
 (``noise_model``, ``dependent_level``, ``independent_level``,
-``dependence_groups`` as '0,1,2;3,4,5', ``distribution``, ``seed``, the world's
+``dependence_groups`` as '0,1,2;3,4,5', ``distribution``, ``rounding``, ``seed``, the world's
 geometry, ``steps``, ``perturb_every``, ``perturbation_deg``) and ``effects``, a
 JSON list of the unmodelled effects the simulator should add (see
 ``gap.effects``).  Keys the file does not give keep the simulator's defaults.
@@ -27,7 +27,7 @@ from . import effects as fx
 WORLD_KEYS = tuple(f.name for f in dataclasses.fields(World))
 TASK_KEYS = ('steps', 'perturb_every', 'perturbation_deg')
 NOISE_KEYS = ('noise_model', 'dependent_level', 'independent_level', 'dependence_groups',
-              'distribution')
+              'distribution', 'rounding')
 KNOWN = WORLD_KEYS + TASK_KEYS + NOISE_KEYS + ('seed', 'effects')
 
 
@@ -47,7 +47,8 @@ class SimConfig:
         n = self.noise
         values = {'noise_model': n.model, 'dependent_level': float(n.dependent),
                   'independent_level': float(n.independent),
-                  'dependence_groups': format_groups(n.groups), 'distribution': n.distribution}
+                  'dependence_groups': format_groups(n.groups), 'distribution': n.distribution,
+                  'rounding': n.rounding}
         values.update({k: float(getattr(self.world, k)) for k in WORLD_KEYS})
         values.update({'steps': self.task.steps, 'perturb_every': self.task.perturb_every,
                        'perturbation_deg': float(self.task.perturbation_deg),
@@ -79,7 +80,8 @@ def from_parameters(values: dict, source: str = 'parameters') -> SimConfig:
                            dependent=float(values.get('dependent_level', n.dependent)),
                            independent=float(values.get('independent_level', n.independent)),
                            groups=parse_groups(groups) if isinstance(groups, str) else groups,
-                           distribution=values.get('distribution', n.distribution))
+                           distribution=values.get('distribution', n.distribution),
+                           rounding=values.get('rounding', n.rounding))
         text = values.get('effects', '') or ''
         if not isinstance(text, str):       # a number or a list would fail inside loads
             raise ValueError(f'effects must be a string of effects, got {text!r}')

@@ -5,7 +5,9 @@ in its sensing and turning; with no effects it gives exactly the core's
 episodes (same streams, same readings).  It is also the hook the simulator
 node needs to honour its ``effects`` parameter.  ``stationary`` samples fixed
 base values for any number of channels, for recordings of robots and boards the
-light model does not describe.
+light model does not describe.  Both honour the noise model's ``rounding``: with
+'reading' the light level is not rounded before the noise; the effects of the
+reading stage act on the unrounded sum, which is rounded and clipped once at the end.
 """
 from __future__ import annotations
 
@@ -120,12 +122,17 @@ class EffectNoise:
 
 def sense(base: np.ndarray, noise: NoiseModel, sensor_draws, group_draws, light: list,
           reading: list) -> np.ndarray:
-    """Light-stage effects, the model's noise on the (integer) light level, reading stage."""
+    """Light-stage effects, the model's noise on the light level (integer unless the
+    reading is rounded at the end), reading stage."""
     level = base
     for apply in light:
         level = apply(level)
-    level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
-    out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
+    if _rounds_level(noise):
+        level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+        out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
+    else:
+        out = noise.added(np.asarray(level, np.float32), sensor_draws,
+                          group_draws).astype(np.float64)
     for apply in reading:
         out = apply(out)
     return np.clip(np.rint(out), 0.0, DARK)
@@ -146,12 +153,13 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
         level = np.asarray(base, np.float64)
         for e in light:
             level = e.over_time(level, rng)
-        flat = _levels(level)
+        flat = _levels(level, _rounds_level(noise))
     else:                       # a read-only base (a replay's light): its levels once
-        flat = _held_levels(base)
+        flat = _held_levels(base, _rounds_level(noise))
     groups = max(1, len(noise.groups))
     d = _draws(int(seed), samples, channels + groups, robots)
-    out = noise.apply(flat, d[:channels], d[channels:]).astype(np.float64)
+    kernel = noise.apply if _rounds_level(noise) else noise.added
+    out = kernel(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in _staged(effects, 'reading'):
         out = e.over_time(out, rng)
@@ -171,24 +179,31 @@ def _draws(seed: int, samples: int, rows: int, robots: int) -> np.ndarray:
     return out
 
 
-def _levels(level: np.ndarray) -> np.ndarray:
-    """(channels, samples x units) float32 integer light levels the model's noise acts on."""
-    level = np.rint(level)
-    level = np.clip(level, 0.0, DARK, out=level).astype(np.float32)
+def _rounds_level(noise) -> bool:
+    return getattr(noise, 'rounding', 'level') == 'level'
+
+
+def _levels(level: np.ndarray, rounded: bool = True) -> np.ndarray:
+    """(channels, samples x units) float32 light levels the model's noise acts on: rounded
+    and clipped unless the reading is rounded at the end."""
+    if rounded:
+        level = np.rint(level)
+        level = np.clip(level, 0.0, DARK, out=level)
+    level = level.astype(np.float32)
     return np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(level.shape[1], -1)
 
 
 _HELD: dict = {}
 
 
-def _held_levels(base: np.ndarray) -> np.ndarray:
+def _held_levels(base: np.ndarray, rounded: bool = True) -> np.ndarray:
     """``_levels`` of a read-only ``base``, made once (read-only too)."""
-    hit = _HELD.get(id(base))
+    hit = _HELD.get((id(base), rounded))
     if hit is not None and hit[0] is base:
         return hit[1]
-    flat = _levels(np.asarray(base, np.float64))
+    flat = _levels(np.asarray(base, np.float64), rounded)
     flat.flags.writeable = False
     if len(_HELD) > 8:
         _HELD.clear()
-    _HELD[id(base)] = (base, flat)
+    _HELD[(id(base), rounded)] = (base, flat)
     return flat

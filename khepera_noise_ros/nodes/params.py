@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core.khepera import World
-from ..core.noise import DISTRIBUTIONS, MODELS, NoiseModel, parse_groups
+from ..core.noise import DISTRIBUTIONS, MODELS, ROUNDINGS, NoiseModel, parse_groups
 from ..core.task import Task
 
 SEED_MAX = 2 ** 53 - 1                  # seeds travel as float64 in episode_start
@@ -175,10 +175,12 @@ def world_from(values: dict[str, Any]) -> World:
 def noise_from(values: dict[str, Any]) -> NoiseModel:
     check_choice('noise_model', values['noise_model'], MODELS)
     check_choice('distribution', values['distribution'], DISTRIBUTIONS)
+    rounding = values.get('rounding', ROUNDINGS[0])     # nodes without the parameter
+    check_choice('rounding', rounding, ROUNDINGS)
     return NoiseModel(model=values['noise_model'], dependent=values['dependent_level'],
                       independent=values['independent_level'],
                       groups=parse_groups(values['dependence_groups']),
-                      distribution=values['distribution'])
+                      distribution=values['distribution'], rounding=rounding)
 
 
 def task_from(values: dict[str, Any]) -> Task:

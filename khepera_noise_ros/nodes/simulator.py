@@ -16,7 +16,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from ..core.noise import DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, NoiseModel, format_groups
+from ..core.noise import (DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, ROUNDINGS, NoiseModel,
+                          format_groups)
 from ..core.task import Task
 from ..gap import effects as fx
 from ..gap.simulate import EffectEpisodes
@@ -25,7 +26,7 @@ from .params import GEOMETRY, SEED_MAX, Spec, noise_from, task_from, world_from
 from .robot_node import RobotNode
 
 NOISE = ('noise_model', 'dependent_level', 'independent_level', 'dependence_groups',
-         'distribution')
+         'distribution', 'rounding')
 _NOISE = NoiseModel()
 
 SIMULATOR_SPECS = (
@@ -39,6 +40,10 @@ SIMULATOR_SPECS = (
          "noise: ',' within a group, ';' between groups, sensors 0..7, e.g. '0,1,2,3,4,5;6,7'."),
     Spec('distribution', _NOISE.distribution, 'Shape of every noise draw; normal has the '
          'same standard deviation as uniform.', choices=DISTRIBUTIONS),
+    Spec('rounding', _NOISE.rounding, 'Where the reading becomes an integer: level (the '
+         "paper's: integer noise on the rounded light level) or reading (the noise added to "
+         'the unrounded light level, rounded and clipped once at the end, as a converter '
+         'does).', choices=ROUNDINGS),
     Spec('seed', 0, 'Seed of real-time episodes (episode n uses seed + n); lockstep episodes '
          'take their per-robot seeds from episode_start.', 0, SEED_MAX),
     Spec('robots', 1, 'Robots simulated in real-time mode (lockstep: as many as '
