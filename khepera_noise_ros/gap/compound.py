@@ -58,7 +58,7 @@ class Compound:
     discrepancy_after: float
     comparison: object = None           # held-out comparison with every chosen effect
     replicates: np.ndarray | None = None
-    rejected: list = field(default_factory=list)   # the best candidate that did not count
+    rejected: list = field(default_factory=list)   # the candidates of the last step, none counted
 
     @property
     def reduction(self) -> float:
@@ -141,9 +141,9 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             if judged[0]:
                 step = (cand, after, effects, judged[1], judged[2], judged[0])
                 break
-            if not rejected:
-                rejected = [{'name': cand.name, 'added_reduction': judged[3],
-                             'p_value': judged[2], 'note': cand.note}]
+            rejected.append({'name': cand.name, 'added_reduction': judged[3],
+                             'p_value': judged[2], 'note': cand.note,
+                             'parts': _part_detail(b, first_cmp, current_cmp, after)})
         if step is None:
             break
         step = _simplest(step, trials, b, first_cmp, current_cmp, current_reps, chosen,
@@ -295,6 +295,23 @@ def _local_gains(before, current, after) -> tuple:
         if d1 > _chance(sum(_protocol(k.family) == part for k in current.keys)):
             left = max(left, (d1 - d2) / d1)
     return before_any, left
+
+
+def _part_detail(b: Target, before, current, after) -> dict:
+    """Per part, what a step did (for ``rejected``): its share of the part before any
+    effect and of what is left, and the paired p on the part's own replicates."""
+    out = {}
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
+        if d0 <= 0 and d1 <= 0:
+            continue
+        reps = [b.replicate_discrepancies(c.select([_protocol(k.family) == part
+                                                    for k in c.keys])) for c in (current, after)]
+        out[part] = {'before_any': round(d0, 2), 'left': round(d1, 2), 'after': round(d2, 2),
+                     'gain_before_any': round((d1 - d2) / d0, 4) if d0 > 0 else 0.0,
+                     'gain_left': round((d1 - d2) / d1, 4) if d1 > 0 else 0.0,
+                     'p': round(paired_p(reps[0], reps[1], d1, d2), 3)}
+    return out
 
 
 def _chance(n: int) -> float:
