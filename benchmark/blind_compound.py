@@ -64,6 +64,8 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False):
     if hard:
         seed = int(rng.integers(0, 2 ** 31))
         names, config, added, truth = hard_compound.draw(rng, seed)
+        how = hard_compound.plan(rng)
+        truth['recorded'] = how
     else:
         names, config, truth = draw_compound(rng, k)
         seed = int(rng.integers(0, 2 ** 31))
@@ -72,8 +74,10 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False):
     if path is not None and path.exists():
         return names, truth, pickle.loads(path.read_bytes())
     world = hard_compound.robot(config, added, seed) if hard else blind_gap.robot(config, seed)
-    recordings = [blind_gap.record_stationary(world),
-                  blind_gap.record_closed_loop(world, genome, seed=seed)]
+    if not hard:
+        how = {'stationary': True, 'headings': False}
+    recordings = ([blind_gap.record_stationary(world)] if how['stationary'] else []) + \
+        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'])]
     if path is not None:
         path.write_bytes(pickle.dumps(recordings))
     return names, truth, recordings

@@ -22,8 +22,6 @@ the same name are not drawn together.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 import blind_gap
@@ -191,5 +189,7 @@ def robot(config: emu.EffectsConfig, added: list, seed: int):
     return world
 
 
-def settings_of(config) -> dict:
-    return {n: dataclasses.asdict(getattr(config, n)) for n in config.enabled}
+def plan(rng) -> dict:
+    """How a case is recorded: closed-loop headings kept (a tracked robot) in half the
+    cases, and in a quarter no stationary recording at all."""
+    return {'headings': bool(rng.random() < 0.5), 'stationary': bool(rng.random() < 0.75)}
