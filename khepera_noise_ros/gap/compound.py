@@ -99,7 +99,8 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
     held-out comparison and replicate discrepancies) over the candidate ``names``;
     ``before`` is the held-out comparison without effects."""
     effect0, note0, cmp0, reps0 = first
-    first_cmp = before if before is not None else b.compare()
+    # the comparisons before any effect and after the top one: the references of the rules
+    first_cmp = (before if before is not None else b.compare(), cmp0)
     d_prev = cmp0.discrepancy
     steps = [entry(effect0, note0, d_before, d_prev, d_before,
                    paired_p(before_reps, reps0, d_before, d_prev))]
@@ -114,20 +115,23 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         trials = []
         for name in remaining:
             cand = fit.fit_one(name, given, c_given)
-            if cand.effect is None:
-                continue
-            try:
-                after = b.compare(chosen + [cand.effect])
-            except Exception:         # noqa: BLE001 - cannot run: not fitting
-                continue
-            trials.append((after.discrepancy, cand, after))
+            after = None
+            if cand.effect is not None:
+                try:
+                    after = b.compare(chosen + [cand.effect])
+                except Exception:         # noqa: BLE001 - cannot run: not fitting
+                    cand = fit.Candidate(name, None, 'cannot run')
+            if (cand.effect is None or after.discrepancy >= d_prev) and _other_loop(chosen, name):
+                cand, after = _loop_pair(a, b, chosen, name, cand, after)
+            if cand.effect is not None:
+                trials.append((after.discrepancy, cand, after))
         if not trials:
             break
         step = None
         trials.sort(key=lambda t: t[0])
         for rank, (d, cand, after) in enumerate(trials):
-            effects = chosen + [cand.effect]
-            if rank < JOINT:
+            effects = _with(chosen, cand)
+            if rank < JOINT or _confounded(current_cmp, after):
                 # fitted jointly: the chosen effects refitted given the candidate (a proxy
                 # chosen earlier, e.g. one group for a shared flicker, can then give way),
                 # kept unless the held-out part says the refit is worse
@@ -143,7 +147,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                 break
             rejected.append({'name': cand.name, 'added_reduction': judged[3],
                              'p_value': judged[2], 'note': cand.note,
-                             'parts': _part_detail(b, first_cmp, current_cmp, after)})
+                             'parts': _part_detail(b, first_cmp[0], current_cmp, after)})
         if step is None:
             break
         step = _simplest(step, trials, b, first_cmp, current_cmp, current_reps, chosen,
@@ -166,10 +170,73 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     current_reps, rejected)
 
 
-def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effects: list,
+LOOP = ('sensor_latency', 'actuator_turn_error')
+
+
+def _other_loop(chosen: list, name: str) -> bool:
+    """Is ``name`` an effect on the loop while another one is chosen?"""
+    return name in LOOP and any(e.name in LOOP and e.name != name for e in chosen)
+
+
+def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tuple:
+    """A latency and a turn error both move the readings' response to a turn: the one
+    chosen first, fitted alone, takes the other's share, and given it the other shows no
+    fingerprint or fits the wrong way.  The candidate is fitted given the chosen effects
+    other than the loop one, the loop one then refitted given it; (candidate, held-out
+    comparison with the pair), the better of that and the plain fit."""
+    base = [e for e in chosen if e.name not in LOOP]
+    given = a.with_given(base)
+    alone = fit.fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+    if alone.effect is None:
+        return cand, after
+    out = list(chosen)
+    for i, e in enumerate(out):
+        if e.name in LOOP:
+            others = out[:i] + out[i + 1:] + [alone.effect]
+            given = a.with_given(others)
+            refit = fit.fit_one(e.name, given,
+                                given.compare(replicates=FINGERPRINT_REPLICATES))
+            if refit.effect is not None and \
+                    given.objective([refit.effect]) < given.objective([e]):
+                out[i] = refit.effect
+    try:
+        paired = b.compare(out + [alone.effect])
+    except Exception:         # noqa: BLE001 - cannot run: not fitting
+        return cand, after
+    if after is not None and after.discrepancy <= paired.discrepancy:
+        return cand, after
+    # the chosen loop effect refitted travels with the candidate (``_backfit`` keeps it
+    # only where it fits the fitting part better)
+    joint = fit.Candidate(name, alone.effect,
+                          alone.note + ' (fitted with the loop effect refitted)')
+    joint.given = out
+    return joint, paired
+
+
+def _with(chosen: list, cand) -> list:
+    """The chosen effects (as refitted with the candidate, ``_loop_pair``) and it."""
+    return list(getattr(cand, 'given', chosen)) + [cand.effect]
+
+
+def _confounded(current, after) -> bool:
+    """Does a step bring one part well closer (a tenth of what is left, above chance)
+    while another moves away?  The effects chosen before it, fitted without it, took
+    part of its share: it is worth fitting them again given it."""
+    closer = away = False
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+        d1, d2 = _part(current, part), _part(after, part)
+        n = sum(_protocol(k.family) == part for k in current.keys)
+        closer |= d1 > _chance(n) and d1 - d2 >= MIN_LOCAL * d1
+        away |= d2 > d1 and d2 > _chance(n)
+    return closer and away
+
+
+def _judge(b: Target, refs: tuple, current_cmp, current_reps, chosen: list, effects: list,
            after, d_before: float, d_prev: float) -> tuple:
     """(the rule it counts by or '', replicate discrepancies, p, added share) of the
-    step from ``chosen`` to ``effects`` (held-out comparison ``after``)."""
+    step from ``chosen`` to ``effects`` (held-out comparison ``after``); ``refs``: the
+    held-out comparisons before any effect and with the top effect alone."""
+    first_cmp, top_cmp = refs
     d_new = after.discrepancy
     reps = b.replicate_discrepancies(after)
     p = paired_p(current_reps, reps, d_prev, d_new)
@@ -178,6 +245,10 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
     family = _family_gain(b, first_cmp, current_cmp, after)
     counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
                      family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
+    if not counts and p < STEP_ALPHA and d_new < d_prev and \
+            _family_gain(b, top_cmp, current_cmp, after) >= MIN_LOCAL and \
+            _top_confirmed(b, chosen, effects):
+        counts = 'beside_top'
     # only a slow wander widens the levels' error bars without bringing anything closer
     # (the level inflation of ``Target``); an effect that adds fast noise rightly widens
     # the spreads' error bars, and judged at the old ones it loses its share
@@ -210,7 +281,7 @@ def _closer(current, after) -> bool:
     return discrepancy(z[other]) < discrepancy(current.z[ci][other])
 
 
-def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, current_reps,
+def _simplest(step: tuple, trials: list, b: Target, refs: tuple, current_cmp, current_reps,
               chosen: list, d_before: float, d_prev: float) -> tuple:
     """The step's candidate, or a simpler one (fewer free parameters, the single effects'
     parsimony rule of ``diagnose``) that also counts and explains the held-out data as
@@ -227,8 +298,8 @@ def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, curr
             rival_reps = b.replicate_discrepancies(rival_after)
             if np.mean(reps < rival_reps) >= 1 - STEP_ALPHA:
                 continue
-        effects = chosen + [rival.effect]
-        rule, rival_reps, p, _ = _judge(b, first_cmp, current_cmp, current_reps, chosen,
+        effects = _with(chosen, rival)
+        rule, rival_reps, p, _ = _judge(b, refs, current_cmp, current_reps, chosen,
                                         effects, rival_after, d_before, d_prev)
         if rule:
             return rival, rival_after, effects, rival_reps, p, rule + ', simpler'
@@ -338,6 +409,16 @@ def _family_gain(b: Target, before, current, after) -> float:
         if p < STEP_ALPHA:
             best = max(best, (d1 - d2) / d0)
     return best
+
+
+def _top_confirmed(b: Target, chosen: list, effects: list) -> bool:
+    """A step that counts only by one family's share of what the top effect left
+    (``beside_top``) is checked again against a second simulated side."""
+    other, prev, new = _second_seed(b, chosen, effects)
+    if new is None:
+        return False
+    top = prev if len(chosen) == 1 else other.compare(chosen[:1])
+    return _family_gain(other, top, prev, new) >= MIN_LOCAL
 
 
 def _family_confirmed(b: Target, before, chosen: list, effects: list) -> bool:
