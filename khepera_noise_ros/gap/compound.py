@@ -13,8 +13,11 @@ simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
 same resampled real data against both simulators).  With the best candidate
 the effects chosen earlier are refitted given the others (one backfitting
 pass), each refit kept only where it lowers the *fitting* part's discrepancy,
-the refitted set only where the held-out one does not rise.  Selection stops
-when no candidate adds a significant share.
+the refitted set only where the held-out one does not rise; so too with any
+candidate whose step is confounded (one part closer, another away).  A latency or
+turn error beside the other one chosen is also fitted without it, the chosen one
+refitted given it (``_loop_pair``).  Selection stops when no candidate adds a
+significant share.
 """
 from __future__ import annotations
 
@@ -99,8 +102,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
     held-out comparison and replicate discrepancies) over the candidate ``names``;
     ``before`` is the held-out comparison without effects."""
     effect0, note0, cmp0, reps0 = first
-    # the comparisons before any effect and after the top one: the references of the rules
-    first_cmp = (before if before is not None else b.compare(), cmp0)
+    first_cmp = before if before is not None else b.compare()
     d_prev = cmp0.discrepancy
     steps = [entry(effect0, note0, d_before, d_prev, d_before,
                    paired_p(before_reps, reps0, d_before, d_prev))]
@@ -147,7 +149,7 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                 break
             rejected.append({'name': cand.name, 'added_reduction': judged[3],
                              'p_value': judged[2], 'note': cand.note,
-                             'parts': _part_detail(b, first_cmp[0], current_cmp, after)})
+                             'parts': _part_detail(b, first_cmp, current_cmp, after)})
         if step is None:
             break
         step = _simplest(step, trials, b, first_cmp, current_cmp, current_reps, chosen,
@@ -231,12 +233,10 @@ def _confounded(current, after) -> bool:
     return closer and away
 
 
-def _judge(b: Target, refs: tuple, current_cmp, current_reps, chosen: list, effects: list,
+def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effects: list,
            after, d_before: float, d_prev: float) -> tuple:
     """(the rule it counts by or '', replicate discrepancies, p, added share) of the
-    step from ``chosen`` to ``effects`` (held-out comparison ``after``); ``refs``: the
-    held-out comparisons before any effect and with the top effect alone."""
-    first_cmp, top_cmp = refs
+    step from ``chosen`` to ``effects`` (held-out comparison ``after``)."""
     d_new = after.discrepancy
     reps = b.replicate_discrepancies(after)
     p = paired_p(current_reps, reps, d_prev, d_new)
@@ -245,10 +245,6 @@ def _judge(b: Target, refs: tuple, current_cmp, current_reps, chosen: list, effe
     family = _family_gain(b, first_cmp, current_cmp, after)
     counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
                      family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
-    if not counts and p < STEP_ALPHA and d_new < d_prev and \
-            _family_gain(b, top_cmp, current_cmp, after) >= MIN_LOCAL and \
-            _top_confirmed(b, chosen, effects):
-        counts = 'beside_top'
     # only a slow wander widens the levels' error bars without bringing anything closer
     # (the level inflation of ``Target``); an effect that adds fast noise rightly widens
     # the spreads' error bars, and judged at the old ones it loses its share
@@ -281,7 +277,7 @@ def _closer(current, after) -> bool:
     return discrepancy(z[other]) < discrepancy(current.z[ci][other])
 
 
-def _simplest(step: tuple, trials: list, b: Target, refs: tuple, current_cmp, current_reps,
+def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, current_reps,
               chosen: list, d_before: float, d_prev: float) -> tuple:
     """The step's candidate, or a simpler one (fewer free parameters, the single effects'
     parsimony rule of ``diagnose``) that also counts and explains the held-out data as
@@ -299,7 +295,7 @@ def _simplest(step: tuple, trials: list, b: Target, refs: tuple, current_cmp, cu
             if np.mean(reps < rival_reps) >= 1 - STEP_ALPHA:
                 continue
         effects = _with(chosen, rival)
-        rule, rival_reps, p, _ = _judge(b, refs, current_cmp, current_reps, chosen,
+        rule, rival_reps, p, _ = _judge(b, first_cmp, current_cmp, current_reps, chosen,
                                         effects, rival_after, d_before, d_prev)
         if rule:
             return rival, rival_after, effects, rival_reps, p, rule + ', simpler'
@@ -409,16 +405,6 @@ def _family_gain(b: Target, before, current, after) -> float:
         if p < STEP_ALPHA:
             best = max(best, (d1 - d2) / d0)
     return best
-
-
-def _top_confirmed(b: Target, chosen: list, effects: list) -> bool:
-    """A step that counts only by one family's share of what the top effect left
-    (``beside_top``) is checked again against a second simulated side."""
-    other, prev, new = _second_seed(b, chosen, effects)
-    if new is None:
-        return False
-    top = prev if len(chosen) == 1 else other.compare(chosen[:1])
-    return _family_gain(other, top, prev, new) >= MIN_LOCAL
 
 
 def _family_confirmed(b: Target, before, chosen: list, effects: list) -> bool:
