@@ -80,3 +80,8 @@ def test_only_a_second_loop_effect_is_fitted_without_the_first():
     assert not compound._other_loop([latency], 'temporal_drift')
     assert not compound._other_loop([fx.TemporalDrift((0,), 0.01, 20.0, False)],
                                     'actuator_turn_error')
+
+
+def test_a_loop_pair_is_tried_only_while_the_closed_loop_is_off():
+    assert compound._loop_left(_cmp({'stationary': 1.0, 'closed_loop': 50.0}))
+    assert not compound._loop_left(_cmp({'stationary': 50.0, 'closed_loop': 0.1}))

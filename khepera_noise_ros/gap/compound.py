@@ -123,7 +123,8 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
                     after = b.compare(chosen + [cand.effect])
                 except Exception:         # noqa: BLE001 - cannot run: not fitting
                     cand = fit.Candidate(name, None, 'cannot run')
-            if (cand.effect is None or after.discrepancy >= d_prev) and _other_loop(chosen, name):
+            if (cand.effect is None or after.discrepancy >= d_prev) and \
+                    _other_loop(chosen, name) and _loop_left(current_cmp):
                 cand, after = _loop_pair(a, b, chosen, name, cand, after)
             if cand.effect is not None:
                 trials.append((after.discrepancy, cand, after))
@@ -178,6 +179,12 @@ LOOP = ('sensor_latency', 'actuator_turn_error')
 def _other_loop(chosen: list, name: str) -> bool:
     """Is ``name`` an effect on the loop while another one is chosen?"""
     return name in LOOP and any(e.name in LOOP and e.name != name for e in chosen)
+
+
+def _loop_left(c) -> bool:
+    """Is more of the closed loop's own discrepancy left than chance gives?"""
+    return _part(c, 'closed_loop') > _chance(sum(_protocol(k.family) == 'closed_loop'
+                                                 for k in c.keys))
 
 
 def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tuple:
