@@ -1,7 +1,7 @@
 """Blind benchmark of the compound diagnosis: 2-4 effects at once (prints figures; not a test).
 
     python benchmark/blind_compound.py [--cases 24] [--seed 0] [--jobs 1] [--cache DIR]
-                                       [--out FILE.json]
+                                       [--hard] [--only K ...] [--out FILE.json]
 
 Each case sets 2-4 effects of the emulated robot (``reality`` effects) at once, each
 at a random location and strength drawn as ``blind_gap.py`` draws a single one; every
@@ -13,7 +13,8 @@ against the effects set), pooled over cases, the median held-out shrink, and for
 every case with a miss or a false effect the compound's ``rejected`` entry and the
 held-out discrepancy of each part (stationary, closed-loop, closed-loop noise)
 before any effect and after the chosen ones.  ``--cache`` keeps the recordings, so a
-change to the diagnosis is measured on the same data.
+change to the diagnosis is measured on the same data.  ``--hard`` draws the cases of
+``hard_compound.py`` instead: a strong loop effect beside weaker sensor effects.
 """
 from __future__ import annotations
 
@@ -33,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 import blind_gap  # noqa: E402
+import hard_compound  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.gap import compound, diagnose  # noqa: E402
 from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
@@ -58,15 +60,24 @@ def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
     return names, dataclasses.replace(base, **effects), truth
 
 
-def _recordings(k: int, rng, genome, cache: Path | None):
-    names, config, truth = draw_compound(rng, k)
-    seed = int(rng.integers(0, 2 ** 31))
-    path = None if cache is None else cache / f'case{k:03d}_{seed}.pkl'
+def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False):
+    if hard:
+        seed = int(rng.integers(0, 2 ** 31))
+        names, config, added, truth = hard_compound.draw(rng, seed)
+        how = hard_compound.plan(rng)
+        truth['recorded'] = how
+    else:
+        names, config, truth = draw_compound(rng, k)
+        seed = int(rng.integers(0, 2 ** 31))
+    tag = 'hard' if hard else 'case'
+    path = None if cache is None else cache / f'{tag}{k:03d}_{seed}.pkl'
     if path is not None and path.exists():
         return names, truth, pickle.loads(path.read_bytes())
-    world = blind_gap.robot(config, seed)
-    recordings = [blind_gap.record_stationary(world),
-                  blind_gap.record_closed_loop(world, genome, seed=seed)]
+    world = hard_compound.robot(config, added, seed) if hard else blind_gap.robot(config, seed)
+    if not hard:
+        how = {'stationary': True, 'headings': False}
+    recordings = ([blind_gap.record_stationary(world)] if how['stationary'] else []) + \
+        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'])]
     if path is not None:
         path.write_bytes(pickle.dumps(recordings))
     return names, truth, recordings
@@ -142,6 +153,9 @@ def main(argv=None) -> int:
     p.add_argument('--jobs', type=int, default=1)
     p.add_argument('--only', type=int, nargs='*', default=None, help='run only these cases')
     p.add_argument('--cache', type=Path, default=None, help='keep the recordings here')
+    p.add_argument('--hard', action='store_true',
+                   help='a strong loop effect beside 1-3 weaker sensor effects of various '
+                        'shapes (benchmark/hard_compound.py)')
     p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
     args = p.parse_args(argv)
     if args.jobs < 1:
@@ -154,7 +168,7 @@ def main(argv=None) -> int:
         blind_gap.SENSOR_NOISE)), remainder=False)
     jobs = []
     for k in range(args.cases):
-        names, truth, recordings = _recordings(k, rng, genome, args.cache)
+        names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard)
         if args.only is None or k in args.only:
             jobs.append((k, names, truth, recordings, options))
     rows = []

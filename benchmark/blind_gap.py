@@ -122,10 +122,12 @@ def record_stationary(world: EmulatedWorld, plan=STATIONARY, samples=SAMPLES,
 
 
 def record_closed_loop(world: EmulatedWorld, genome, condition='task',
-                       episodes=CLOSED_LOOP_EPISODES, task=Task(), seed=0) -> Recording:
+                       episodes=CLOSED_LOOP_EPISODES, task=Task(), seed=0,
+                       headings: bool = False) -> Recording:
     """The task on the robot as the hardware bridge runs it (``KheperaRobots``: knocks
     made by the wheels every ``perturb_every`` steps); headings are not recorded, as a
-    real robot does not know them.  The experimenter faces the robot to the lamp before
+    real robot does not know them (``headings``: kept, the lamp's bearing, as from a
+    tracked robot).  The experimenter faces the robot to the lamp before
     each episode."""
     weights = network.unpack(np.asarray(genome)[None])
     robots = KheperaRobots(InProcessRobots(world), CONDITIONS[condition].world(), task)
@@ -136,7 +138,8 @@ def record_closed_loop(world: EmulatedWorld, genome, condition='task',
         t = 0
         while readings is not None:
             direction, power = network.act(weights, readings.astype(np.float32))
-            rows.append((e, t, math.nan, condition, readings[0].copy(), int(direction[0]),
+            heading = float(robots.bearing_deg[0]) if headings else math.nan
+            rows.append((e, t, heading, condition, readings[0].copy(), int(direction[0]),
                          int(power[0])))
             readings = robots.step(direction, power)
             t += 1

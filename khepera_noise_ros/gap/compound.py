@@ -13,8 +13,11 @@ simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
 same resampled real data against both simulators).  With the best candidate
 the effects chosen earlier are refitted given the others (one backfitting
 pass), each refit kept only where it lowers the *fitting* part's discrepancy,
-the refitted set only where the held-out one does not rise.  Selection stops
-when no candidate adds a significant share.
+the refitted set only where the held-out one does not rise; so too with any
+candidate whose step is confounded (one part closer, another away).  A latency or
+turn error beside the other one chosen is also fitted without it, the chosen one
+refitted given it (``_loop_pair``).  Selection stops when no candidate adds a
+significant share.
 """
 from __future__ import annotations
 
@@ -58,7 +61,7 @@ class Compound:
     discrepancy_after: float
     comparison: object = None           # held-out comparison with every chosen effect
     replicates: np.ndarray | None = None
-    rejected: list = field(default_factory=list)   # the best candidate that did not count
+    rejected: list = field(default_factory=list)   # the candidates of the last step, none counted
 
     @property
     def reduction(self) -> float:
@@ -114,20 +117,24 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         trials = []
         for name in remaining:
             cand = fit.fit_one(name, given, c_given)
-            if cand.effect is None:
-                continue
-            try:
-                after = b.compare(chosen + [cand.effect])
-            except Exception:         # noqa: BLE001 - cannot run: not fitting
-                continue
-            trials.append((after.discrepancy, cand, after))
+            after = None
+            if cand.effect is not None:
+                try:
+                    after = b.compare(chosen + [cand.effect])
+                except Exception:         # noqa: BLE001 - cannot run: not fitting
+                    cand = fit.Candidate(name, None, 'cannot run')
+            if (cand.effect is None or after.discrepancy >= d_prev) and \
+                    _other_loop(chosen, name) and _loop_left(current_cmp):
+                cand, after = _loop_pair(a, b, chosen, name, cand, after)
+            if cand.effect is not None:
+                trials.append((after.discrepancy, cand, after))
         if not trials:
             break
         step = None
         trials.sort(key=lambda t: t[0])
         for rank, (d, cand, after) in enumerate(trials):
-            effects = chosen + [cand.effect]
-            if rank < JOINT:
+            effects = _with(chosen, cand)
+            if rank < JOINT or _confounded(current_cmp, after):
                 # fitted jointly: the chosen effects refitted given the candidate (a proxy
                 # chosen earlier, e.g. one group for a shared flicker, can then give way),
                 # kept unless the held-out part says the refit is worse
@@ -141,9 +148,9 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
             if judged[0]:
                 step = (cand, after, effects, judged[1], judged[2], judged[0])
                 break
-            if not rejected:
-                rejected = [{'name': cand.name, 'added_reduction': judged[3],
-                             'p_value': judged[2], 'note': cand.note}]
+            rejected.append({'name': cand.name, 'added_reduction': judged[3],
+                             'p_value': judged[2], 'note': cand.note,
+                             'parts': _part_detail(b, first_cmp, current_cmp, after)})
         if step is None:
             break
         step = _simplest(step, trials, b, first_cmp, current_cmp, current_reps, chosen,
@@ -164,6 +171,73 @@ def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.
         s['sensors'] = list(e.sensors)
     return Compound(chosen, steps, d_before, current_cmp.discrepancy, current_cmp,
                     current_reps, rejected)
+
+
+LOOP = ('sensor_latency', 'actuator_turn_error')
+
+
+def _other_loop(chosen: list, name: str) -> bool:
+    """Is ``name`` an effect on the loop while another one is chosen?"""
+    return name in LOOP and any(e.name in LOOP and e.name != name for e in chosen)
+
+
+def _loop_left(c) -> bool:
+    """Is more of the closed loop's own discrepancy left than chance gives?"""
+    return _part(c, 'closed_loop') > _chance(sum(_protocol(k.family) == 'closed_loop'
+                                                 for k in c.keys))
+
+
+def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tuple:
+    """A latency and a turn error both move the readings' response to a turn: the one
+    chosen first, fitted alone, takes the other's share, and given it the other shows no
+    fingerprint or fits the wrong way.  The candidate is fitted given the chosen effects
+    other than the loop one, the loop one then refitted given it; (candidate, held-out
+    comparison with the pair), the better of that and the plain fit."""
+    base = [e for e in chosen if e.name not in LOOP]
+    given = a.with_given(base)
+    alone = fit.fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+    if alone.effect is None:
+        return cand, after
+    out = list(chosen)
+    for i, e in enumerate(out):
+        if e.name in LOOP:
+            others = out[:i] + out[i + 1:] + [alone.effect]
+            given = a.with_given(others)
+            refit = fit.fit_one(e.name, given,
+                                given.compare(replicates=FINGERPRINT_REPLICATES))
+            if refit.effect is not None and \
+                    given.objective([refit.effect]) < given.objective([e]):
+                out[i] = refit.effect
+    try:
+        paired = b.compare(out + [alone.effect])
+    except Exception:         # noqa: BLE001 - cannot run: not fitting
+        return cand, after
+    if after is not None and after.discrepancy <= paired.discrepancy:
+        return cand, after
+    # the chosen loop effect refitted travels with the candidate (``_backfit`` keeps it
+    # only where it fits the fitting part better)
+    joint = fit.Candidate(name, alone.effect,
+                          alone.note + ' (fitted with the loop effect refitted)')
+    joint.given = out
+    return joint, paired
+
+
+def _with(chosen: list, cand) -> list:
+    """The chosen effects (as refitted with the candidate, ``_loop_pair``) and it."""
+    return list(getattr(cand, 'given', chosen)) + [cand.effect]
+
+
+def _confounded(current, after) -> bool:
+    """Does a step bring one part well closer (a tenth of what is left, above chance)
+    while another moves away?  The effects chosen before it, fitted without it, took
+    part of its share: it is worth fitting them again given it."""
+    closer = away = False
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+        d1, d2 = _part(current, part), _part(after, part)
+        n = sum(_protocol(k.family) == part for k in current.keys)
+        closer |= d1 > _chance(n) and d1 - d2 >= MIN_LOCAL * d1
+        away |= d2 > d1 and d2 > _chance(n)
+    return closer and away
 
 
 def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effects: list,
@@ -227,7 +301,7 @@ def _simplest(step: tuple, trials: list, b: Target, first_cmp, current_cmp, curr
             rival_reps = b.replicate_discrepancies(rival_after)
             if np.mean(reps < rival_reps) >= 1 - STEP_ALPHA:
                 continue
-        effects = chosen + [rival.effect]
+        effects = _with(chosen, rival)
         rule, rival_reps, p, _ = _judge(b, first_cmp, current_cmp, current_reps, chosen,
                                         effects, rival_after, d_before, d_prev)
         if rule:
@@ -295,6 +369,23 @@ def _local_gains(before, current, after) -> tuple:
         if d1 > _chance(sum(_protocol(k.family) == part for k in current.keys)):
             left = max(left, (d1 - d2) / d1)
     return before_any, left
+
+
+def _part_detail(b: Target, before, current, after) -> dict:
+    """Per part, what a step did (for ``rejected``): its share of the part before any
+    effect and of what is left, and the paired p on the part's own replicates."""
+    out = {}
+    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
+        if d0 <= 0 and d1 <= 0:
+            continue
+        reps = [b.replicate_discrepancies(c.select([_protocol(k.family) == part
+                                                    for k in c.keys])) for c in (current, after)]
+        out[part] = {'before_any': round(d0, 2), 'left': round(d1, 2), 'after': round(d2, 2),
+                     'gain_before_any': round((d1 - d2) / d0, 4) if d0 > 0 else 0.0,
+                     'gain_left': round((d1 - d2) / d1, 4) if d1 > 0 else 0.0,
+                     'p': round(paired_p(reps[0], reps[1], d1, d2), 3)}
+    return out
 
 
 def _chance(n: int) -> float:
