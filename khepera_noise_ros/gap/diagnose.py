@@ -201,7 +201,8 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
     scored.sort(key=lambda s: -s[0]['heldout_reduction'])
     scored = _parsimonious(scored, o.alpha)
     if significant and o.rounding:
-        a, b, scored = _rounding(result, a, b, candidates, scored, d_before, before_reps, o)
+        a, b, scored, _ = _rounding(result, a, b, candidates, scored, d_before, before_reps,
+                                    o)
     result.effects = [s[0] for s in scored]
     best, best_cmp, best_effect, _ = scored[0] if scored else (None, None, None, None)
     if significant and best is not None:
@@ -237,20 +238,25 @@ def diagnose(recordings: list[Recording], options: Options = Options(), reality=
 
 
 def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_before: float,
-              before_reps, o: Options, given=None) -> tuple:
-    """(a, b, scored) with the rounding the fitting part's value lattice prefers given the
-    best effect (or ``given``; ``gap.rounding``), confirmed on the held-out part's
-    lattice; with the other rounding every candidate is scored again (not when
-    ``given`` is the compound: ``_late_rounding``)."""
+              before_reps, o: Options, given=None, known=None) -> tuple:
+    """(a, b, scored, the held-out comparison with ``given`` under the rounding chosen,
+    None if it is kept) with the rounding the fitting part's value lattice prefers
+    given the best effect (or ``given``, whose held-out comparison is ``known``;
+    ``gap.rounding``), confirmed on the held-out part's lattice; with the other rounding
+    every candidate is scored again (not when ``given`` is the compound:
+    ``_late_rounding``)."""
     late = given is not None
     if not late:
         best = scored[0][2] if scored and scored[0][1] is not None else None
         given = [best] if best is not None else []
+        known = scored[0][1] if best is not None else None
     choice = rounding.choose(a, given, o.reduction_alpha)
     if choice['rounding'] != a.config.noise.rounding:
         b2 = rounding.retarget(b, choice['rounding'])
-        held = {choice['given']: rounding.lattice(b, b.compare(given))[0],
-                choice['rounding']: rounding.lattice(b2, b2.compare(given))[0]}
+        switched = b2.compare(given)
+        known = known if known is not None else b.compare(given)
+        held = {choice['given']: rounding.lattice(b, known)[0],
+                choice['rounding']: rounding.lattice(b2, switched)[0]}
         choice['lattice_held_out'] = held
         if held[choice['rounding']] >= held[choice['given']]:
             choice['note'] += '; not confirmed on the held-out part: the given is kept'
@@ -258,14 +264,14 @@ def _rounding(result: Diagnosis, a: Target, b: Target, candidates, scored, d_bef
     choice['given_effects'] = [e.name for e in given]
     result.rounding = choice
     if choice['rounding'] == a.config.noise.rounding:
-        return a, b, scored
+        return a, b, scored, None
     a, b = rounding.retarget(a, choice['rounding']), b2
     if not late:
         result.notes.append(choice['note'])
         scored = [_score(b, cand, d_before, before_reps, o) for cand in candidates]
         scored.sort(key=lambda s: -s[0]['heldout_reduction'])
         scored = _parsimonious(scored, o.alpha)
-    return a, b, scored
+    return a, b, scored, switched
 
 
 def _late_rounding(result: Diagnosis, a: Target, b: Target, d_before: float,
@@ -276,12 +282,12 @@ def _late_rounding(result: Diagnosis, a: Target, b: Target, d_before: float,
     discrepancy falls (choosing the compound again would double the diagnosis's time)."""
     early = {k: result.rounding[k] for k in ('rounding', 'lattice', 'p_value')}
     effects = list(result.compound.effects)
-    a2, b2, _ = _rounding(result, a, b, [], [], d_before, None, o, effects)
+    c = result.compound
+    a2, b2, _, after = _rounding(result, a, b, [], [], d_before, None, o, effects,
+                                 c.comparison)
     result.rounding['early'] = early
     if a2 is a:
         return a, b
-    after = b2.compare(effects)
-    c = result.compound
     if after.discrepancy >= c.discrepancy_after:
         result.rounding['rounding'] = result.rounding['given']
         result.rounding['note'] += (f'; the chosen effects\' held-out discrepancy does not '
