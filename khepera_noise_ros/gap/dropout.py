@@ -106,7 +106,7 @@ def repair(x: np.ndarray, runs: list,
         # a value standing apart from all the sensor's other readings is no noise tail
         # however wide the noise, nor a level a moving light reaches: its readings need
         # only be isolated and ``AWAY`` from their neighbours
-        loose = (apart & ~keep).any() and _detached(x[:, k], end, hits[end], k)
+        loose = (apart & ~keep).any() and _detached(xt[k], end, hits[end], k)
         if loose:
             keep = apart
         if not keep.any():
