@@ -36,13 +36,20 @@ NAME = {'spread_dark': 'intensity_dependent_noise', 'spread_bright': 'intensity_
 SHAPES = tuple(NAME)
 
 
-class BrightSpread:
+class _OnSensors:
+    """A process acting on ``sensors`` (a mask over the eight) with its own stream."""
+
+    def __init__(self, sensors, seed: int):
+        self.mask = np.isin(np.arange(SENSORS), sensors)
+        self.rng = np.random.default_rng(seed)
+
+
+class BrightSpread(_OnSensors):
     """Each sensor's own noise, sd growing with brightness (low readings)."""
 
     def __init__(self, sensors, strength: float, exponent: float, seed: int):
-        self.mask = np.isin(np.arange(SENSORS), sensors)
+        super().__init__(sensors, seed)
         self.strength, self.exponent = strength, exponent
-        self.rng = np.random.default_rng(seed)
 
     def apply(self, level, z, rows):
         bright = np.clip(DARK - level, 0.0, DARK)
@@ -51,13 +58,12 @@ class BrightSpread:
         return np.where(self.mask, level + noise, level)
 
 
-class GainSteps:
+class GainSteps(_OnSensors):
     """A gain shared by ``sensors`` that jumps to a new value every ``every`` samples."""
 
     def __init__(self, sensors, strength: float, every: int, seed: int):
-        self.mask = np.isin(np.arange(SENSORS), sensors)
+        super().__init__(sensors, seed)
         self.strength, self.every = strength, every
-        self.rng = np.random.default_rng(seed)
         self.count, self.gain = 0, 0.0
 
     def apply(self, level, z, rows):
@@ -67,13 +73,12 @@ class GainSteps:
         return np.where(self.mask, level * (1.0 + self.gain), level)
 
 
-class Dropouts:
+class Dropouts(_OnSensors):
     """With probability ``rate`` a reading of ``sensors`` is ``value``."""
 
     def __init__(self, sensors, rate: float, value: float, seed: int):
-        self.mask = np.isin(np.arange(SENSORS), sensors)
+        super().__init__(sensors, seed)
         self.rate, self.value = rate, value
-        self.rng = np.random.default_rng(seed)
 
     def apply(self, level, z, rows):
         hit = (self.rng.random(level.shape) < self.rate) & self.mask

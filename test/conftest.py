@@ -18,12 +18,13 @@ def next_domain_id() -> int:
 
 
 @contextmanager
-def ros_domain():
-    """A fresh rclpy Context on its own domain, always shut down."""
+def ros_domain(args=None):
+    """A fresh rclpy Context on its own domain (with command-line ``args``, e.g. a
+    ``--params-file``), always shut down."""
     import rclpy
     from rclpy.context import Context
     context = Context()
-    rclpy.init(context=context, domain_id=next_domain_id())
+    rclpy.init(args=args, context=context, domain_id=next_domain_id())
     try:
         yield context
     finally:

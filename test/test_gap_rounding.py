@@ -93,24 +93,18 @@ def test_the_rounding_goes_through_the_params_file_and_bad_values_are_refused(tm
 
 def test_the_simulator_node_loads_the_rounding_and_refuses_a_bad_one(tmp_path):
     import rclpy
-    from rclpy.context import Context
 
-    from conftest import next_domain_id
+    from conftest import ros_domain
     from khepera_noise_ros.nodes.params import noise_from
     from khepera_noise_ros.nodes.simulator import Simulator
     path = simconfig.write(READING, tmp_path / 'fitted_params.yaml')
-    context = Context()
-    rclpy.init(args=['--ros-args', '--params-file', str(path)], context=context,
-               domain_id=next_domain_id())
-    try:
+    with ros_domain(['--ros-args', '--params-file', str(path)]) as context:
         node = Simulator(context=context)
         value = node.get_parameter('rounding').value
         rounding_used = node.backend.noise.rounding
         refused = node.set_parameters([rclpy.parameter.Parameter('rounding', value='late')])
         kept = node.get_parameter('rounding').value
         node.destroy_node()
-    finally:
-        context.try_shutdown()
     assert value == 'reading' and rounding_used == 'reading'
     assert not refused[0].successful and 'late' in refused[0].reason and kept == 'reading'
     values = {'noise_model': 'independent', 'dependent_level': 0.0, 'independent_level': 0.02,

@@ -58,24 +58,16 @@ def test_effects_and_parameters_round_trip_through_a_params_file(tmp_path):
 
 
 def test_the_simulator_node_loads_the_written_params_file(tmp_path):
-    import rclpy
-    from rclpy.context import Context
-
-    from conftest import next_domain_id
+    from conftest import ros_domain
     from khepera_noise_ros.nodes.simulator import Simulator
     config = simconfig.SimConfig(noise=NoiseModel('combination', 0.045, 0.015, ((2, 3),),
                                                   'normal'),
                                  effects=(fx.TemporalDrift((0, 1), 0.01, 20.0),))
     path = simconfig.write(config, tmp_path / 'fitted.yaml')
-    context = Context()
-    rclpy.init(args=['--ros-args', '--params-file', str(path)], context=context,
-               domain_id=next_domain_id())
-    try:
+    with ros_domain(['--ros-args', '--params-file', str(path)]) as context:
         node = Simulator(context=context)
         values = {k: node.get_parameter(k).value for k in simconfig.NOISE_KEYS}
         node.destroy_node()
-    finally:
-        context.try_shutdown()
     assert values == {'noise_model': 'combination', 'dependent_level': 0.045,
                       'independent_level': 0.015, 'dependence_groups': '2,3',
                       'distribution': 'normal', 'rounding': 'level'}

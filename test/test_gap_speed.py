@@ -13,7 +13,7 @@ from khepera_noise_ros.gap import blockcounts, blocklength, compound, fit, stati
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import Blocks, pack
 from khepera_noise_ros.gap.fitbase import Candidate
-from test_gap_support import CONFIG, recorded, stationary_protocol
+from test_gap_support import CONFIG, recorded, stationary_protocol, sums_both_ways
 
 
 def _blocks(rng, strata=5, per=(0, 1, 3, 7, 12), width=6, bad=False) -> Blocks:
@@ -166,14 +166,7 @@ def test_block_sums_of_rows_in_order_equal_the_general_path():
     """A recording in step order takes the shortcut (no reordering of its rows); the
     general path, which reorders, gives the same sums."""
     rec = recorded(stationary_protocol(samples=20), [fx.SensorLatency((2,), 1)])
-    shortcut = statistics.stationary_blocks(rec, rec.channels_used, 5)
-    lay = statistics._layout(rec, 5)
-    assert lay['sorted']
-    lay['sorted'] = False
-    try:
-        general = statistics.stationary_blocks(rec, rec.channels_used, 5)
-    finally:
-        lay['sorted'] = True
+    shortcut, general = sums_both_ways(rec, 5, 'sorted')
     assert np.array_equal(shortcut.sums, general.sums)
     shuffled = rec.select(np.random.default_rng(0).permutation(len(rec)))
     other = statistics.stationary_blocks(shuffled, rec.channels_used, 5)

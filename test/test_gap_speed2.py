@@ -10,7 +10,7 @@ import numpy as np
 from khepera_noise_ros.gap import dropout, fit, ownwander, resample, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import pack
-from test_gap_support import CONFIG, recorded, stationary_protocol
+from test_gap_support import CONFIG, recorded, stationary_protocol, sums_both_ways
 
 
 def _count_replays(monkeypatch) -> list:
@@ -177,14 +177,7 @@ def test_cross_products_from_the_triangle_equal_the_full_block_sums():
 
 def test_run_means_of_rows_in_run_order_equal_the_reordered_path():
     rec = recorded(stationary_protocol(samples=14), [fx.SensorLatency((1,), 1)])
-    shortcut = statistics.stationary_blocks(rec, rec.channels_used, 4)
-    lay = statistics._layout(rec, 4)
-    assert lay['runs_sorted']
-    lay['runs_sorted'] = False
-    try:
-        general = statistics.stationary_blocks(rec, rec.channels_used, 4)
-    finally:
-        lay['runs_sorted'] = True
+    shortcut, general = sums_both_ways(rec, 4, 'runs_sorted')
     assert np.array_equal(shortcut.sums, general.sums)
 
 

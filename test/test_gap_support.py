@@ -105,3 +105,17 @@ def test_holm_adjusts_and_keeps_order():
     p = np.array([0.01, 0.04, 0.03, 0.5])
     adjusted = where.holm(p)
     assert adjusted.tolist() == pytest.approx([0.04, 0.09, 0.09, 0.5])
+
+
+def sums_both_ways(rec: Recording, block: int, flag: str) -> tuple:
+    """(block sums by the shortcut the layout's ``flag`` allows, by the general path) of
+    ``rec``: the flag must be set, and is cleared only while the general path runs."""
+    shortcut = statistics.stationary_blocks(rec, rec.channels_used, block)
+    lay = statistics._layout(rec, block)
+    assert lay[flag]
+    lay[flag] = False
+    try:
+        general = statistics.stationary_blocks(rec, rec.channels_used, block)
+    finally:
+        lay[flag] = True
+    return shortcut, general
