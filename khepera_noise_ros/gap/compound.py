@@ -183,8 +183,7 @@ def _other_loop(chosen: list, name: str) -> bool:
 
 def _loop_left(c) -> bool:
     """Is more of the closed loop's own discrepancy left than chance gives?"""
-    return _part(c, 'closed_loop') > _chance(sum(_protocol(k.family) == 'closed_loop'
-                                                 for k in c.keys))
+    return _part(c, 'closed_loop') > _part_chance(c, 'closed_loop')
 
 
 def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tuple:
@@ -201,13 +200,7 @@ def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tu
     out = list(chosen)
     for i, e in enumerate(out):
         if e.name in LOOP:
-            others = out[:i] + out[i + 1:] + [alone.effect]
-            given = a.with_given(others)
-            refit = fit.fit_one(e.name, given,
-                                given.compare(replicates=FINGERPRINT_REPLICATES))
-            if refit.effect is not None and \
-                    given.objective([refit.effect]) < given.objective([e]):
-                out[i] = refit.effect
+            out[i] = _refit(a, e, out[:i] + out[i + 1:] + [alone.effect])
     try:
         paired = b.compare(out + [alone.effect])
     except Exception:         # noqa: BLE001 - cannot run: not fitting
@@ -216,15 +209,14 @@ def _loop_pair(a: Target, b: Target, chosen: list, name: str, cand, after) -> tu
         return cand, after
     # the chosen loop effect refitted travels with the candidate (``_backfit`` keeps it
     # only where it fits the fitting part better)
-    joint = fit.Candidate(name, alone.effect,
-                          alone.note + ' (fitted with the loop effect refitted)')
-    joint.given = out
-    return joint, paired
+    return fit.Candidate(name, alone.effect,
+                         alone.note + ' (fitted with the loop effect refitted)',
+                         given=out), paired
 
 
 def _with(chosen: list, cand) -> list:
     """The chosen effects (as refitted with the candidate, ``_loop_pair``) and it."""
-    return list(getattr(cand, 'given', chosen)) + [cand.effect]
+    return list(chosen if cand.given is None else cand.given) + [cand.effect]
 
 
 def _confounded(current, after) -> bool:
@@ -232,11 +224,11 @@ def _confounded(current, after) -> bool:
     while another moves away?  The effects chosen before it, fitted without it, took
     part of its share: it is worth fitting them again given it."""
     closer = away = False
-    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+    for part in PARTS:
         d1, d2 = _part(current, part), _part(after, part)
-        n = sum(_protocol(k.family) == part for k in current.keys)
-        closer |= d1 > _chance(n) and d1 - d2 >= MIN_LOCAL * d1
-        away |= d2 > d1 and d2 > _chance(n)
+        chance = _part_chance(current, part)
+        closer |= d1 > chance and d1 - d2 >= MIN_LOCAL * d1
+        away |= d2 > d1 and d2 > chance
     return closer and away
 
 
@@ -362,11 +354,11 @@ def _local_gains(before, current, after) -> tuple:
     the chosen effects leave a small remainder, an effect that explains much of that
     remainder is still a small share of the gap before any effect."""
     before_any = left = 0.0
-    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+    for part in PARTS:
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 > 0:
             before_any = max(before_any, (d1 - d2) / d0)
-        if d1 > _chance(sum(_protocol(k.family) == part for k in current.keys)):
+        if d1 > _part_chance(current, part):
             left = max(left, (d1 - d2) / d1)
     return before_any, left
 
@@ -375,7 +367,7 @@ def _part_detail(b: Target, before, current, after) -> dict:
     """Per part, what a step did (for ``rejected``): its share of the part before any
     effect and of what is left, and the paired p on the part's own replicates."""
     out = {}
-    for part in ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout'):
+    for part in PARTS:
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 <= 0 and d1 <= 0:
             continue
@@ -436,6 +428,11 @@ def _part(c, part: str) -> float:
     return _discrepancy_of(c, lambda fam: _protocol(fam) == part)
 
 
+def _part_chance(c, part: str) -> float:
+    """``_chance`` of one part's statistics in comparison ``c``."""
+    return _chance(sum(_protocol(k.family) == part for k in c.keys))
+
+
 def _discrepancy_of(c, wanted) -> float:
     """The discrepancy of the statistics of ``c`` whose family is ``wanted`` (0 if none)."""
     keep = np.array([wanted(k.family) for k in c.keys], bool)
@@ -450,6 +447,7 @@ def _protocol(family: str) -> str:
     return 'closed_loop_noise' if family in closednoise.FAMILIES else 'closed_loop'
 
 
+PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout')   # see ``_protocol``
 STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
               'spread_vs_level', 'step_response', 'mode_share', 'granularity',
               'pileup'}
@@ -460,11 +458,16 @@ def _backfit(a: Target, chosen: list) -> list:
     where it lowers the fitting part's discrepancy (the held-out part is not used)."""
     out = list(chosen)
     for i in range(len(out) - 1):
-        others = out[:i] + out[i + 1:]
-        given = a.with_given(others)
-        cand = fit.fit_one(out[i].name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
-        if cand.effect is None or cand.effect == out[i]:      # nothing to choose between
-            continue
-        if given.objective([cand.effect]) < given.objective([out[i]]):
-            out[i] = cand.effect
+        out[i] = _refit(a, out[i], out[:i] + out[i + 1:])
     return out
+
+
+def _refit(a: Target, effect, others: list):
+    """``effect`` refitted given ``others``, kept only where it lowers the fitting part's
+    discrepancy; else ``effect``."""
+    given = a.with_given(others)
+    cand = fit.fit_one(effect.name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+    if cand.effect is None or cand.effect == effect:      # nothing to choose between
+        return effect
+    return cand.effect if given.objective([cand.effect]) < given.objective([effect]) \
+        else effect

@@ -17,6 +17,7 @@ class Candidate:
     name: str
     effect: object | None     # None: nothing to add (see ``note``)
     note: str
+    given: list | None = None  # the chosen effects as refitted with it (``compound``)
 
 
 def rows(c: Comparison, family: str):

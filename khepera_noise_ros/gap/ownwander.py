@@ -161,5 +161,4 @@ def of_target(target) -> dict:
     if not real:
         return {}
     # the target's recordings do not change: their own parts are remembered with it
-    memo = target.__dict__.setdefault('_own_parts', {})
-    return wandering(real, target.simulate(kinds=('stationary',)), memo)
+    return wandering(real, target.simulate(kinds=('stationary',)), target.own_parts)

@@ -127,13 +127,8 @@ def compare(target, c: Comparison, effects=()) -> Comparison:
     k = copies(target)
     if k == target.copies or not _undecided(real, own):
         return recount(c, real, own)
-    # not through the replay cache: the fitters' replays stay in it
-    effects = tuple(target.given) + tuple(effects)
-    sims = [dropout.prepared(replay.replay(rec, target.config, effects,
-                                           seed=target.seed + 7919 * i, replicates=k,
-                                           base=target.base))
-            for i, rec in enumerate(target.recordings)]
-    return recount(c, real, counts(sims))
+    # not kept among the remembered replays: the fitters' replays stay there
+    return recount(c, real, counts(target.simulate(effects, copies=k, remember=False)))
 
 
 def _undecided(real: dict, sim: dict) -> bool:

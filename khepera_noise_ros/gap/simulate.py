@@ -148,17 +148,18 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
     """
     samples, channels, robots = base.shape
     rng = np.random.default_rng(_entropy(seed))
+    rounded = _rounds_level(noise)
     light = _staged(effects, 'light')
     if light or base.flags.writeable:
         level = np.asarray(base, np.float64)
         for e in light:
             level = e.over_time(level, rng)
-        flat = _levels(level, _rounds_level(noise))
+        flat = _levels(level, rounded)
     else:                       # a read-only base (a replay's light): its levels once
-        flat = _held_levels(base, _rounds_level(noise))
+        flat = _held_levels(base, rounded)
     groups = max(1, len(noise.groups))
     d = _draws(int(seed), samples, channels + groups, robots)
-    kernel = noise.apply if _rounds_level(noise) else noise.added
+    kernel = noise.apply if rounded else noise.added
     out = kernel(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in _staged(effects, 'reading'):

@@ -59,6 +59,7 @@ class Target:
                       for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
         self.real = _join(self._real)
         self._objectives = {}     # objective values, shared with ``with_given`` copies
+        self.own_parts = {}       # the real recordings' own-wander parts (``gap.ownwander``)
 
     def _chosen(self, kinds) -> list[int]:
         return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
@@ -67,11 +68,14 @@ class Target:
         """The (dropout-repaired) recordings of one protocol, 'stationary' or 'closed_loop'."""
         return [self.recordings[i] for i in self._chosen((kind,))]
 
-    def simulate(self, effects=(), copies: int | None = None, kinds=None) -> list[Recording]:
+    def simulate(self, effects=(), copies: int | None = None, kinds=None,
+                 remember: bool = True) -> list[Recording]:
+        """Replays of the recordings of ``kinds`` with ``effects`` (and the given ones);
+        ``remember=False``: not kept among the remembered replays (``_replay``)."""
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
         return [_replay(self.recordings[i], self.config, effects, self.seed + 7919 * i,
-                        copies, self.base) for i in self._chosen(kinds)]
+                        copies, self.base, remember) for i in self._chosen(kinds)]
 
     def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
         return self._simulated(effects, replicates, kinds)[0]
@@ -262,22 +266,24 @@ REPLAY_CACHE = 16
 
 
 def _replay(rec: Recording, config: SimConfig, effects: tuple, seed: int, copies: int,
-            base: str) -> Recording:
+            base: str, remember: bool = True) -> Recording:
     """``replay.replay`` with its dropouts repaired (``dropout.prepared``), remembered: a
     replay is a deterministic function of the recording, the configuration, the effects,
     the seed and the copies, and the fitters ask for the same one again (the simulator
     with the chosen effects and nothing more).  A replay given out is read-only, since
-    it is shared."""
+    it is shared.  ``remember=False`` (a one-off, e.g. many copies for a count): neither
+    looked up nor kept, so the fitters' replays stay."""
     key = (id(rec), config, effects, seed, copies, base)
     try:
-        hit = _REPLAYS.get(key)
+        hit = _REPLAYS.get(key) if remember else None
     except TypeError:           # an unhashable parameter: replay it every time
-        return dropout.prepared(replay.replay(rec, config, effects, seed=seed,
-                                              replicates=copies, base=base))
+        hit, remember = None, False
     if hit is not None and hit[0] is rec:
         _REPLAYS.move_to_end(key)
         return hit[1]
     raw = replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
+    if not remember:
+        return dropout.prepared(raw)
     raw.readings.flags.writeable = False
     sim = dropout.prepared(raw)       # repaired once, not again when asked again
     sim.readings.flags.writeable = False
