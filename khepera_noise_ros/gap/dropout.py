@@ -98,11 +98,11 @@ def repair(x: np.ndarray, runs: list,
     # noise tail's, near their neighbours; only what is left needs its run's scale
     at = np.concatenate([i for _, _, i in todo])
     k_at = np.concatenate([np.full(i.size, k) for k, _, i in todo])
-    near, lower, d, level = _local_test(x, at, k_at, run_of, first, sizes, order)
+    near, lower, d, alone = _local_test(x, at, k_at, run_of, first, sizes, order)
     cols: dict = {}       # per channel: readings run by run, distances from local levels
     cuts = np.cumsum([i.size for *_, i in todo])[:-1]
     for (k, end, i), keep, low, dist, apart in zip(
-            todo, *(np.split(v, cuts) for v in (near, lower, d, level))):
+            todo, *(np.split(v, cuts) for v in (near, lower, d, alone))):
         # a value standing apart from all the sensor's other readings is no noise tail
         # however wide the noise, nor a level a moving light reaches: its readings need
         # only be isolated and ``AWAY`` from their neighbours
