@@ -8,12 +8,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
-from . import closednoise, dropout, turnscatter
+from . import closednoise, dropout, loopvalues, turnscatter
 from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 
-def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
-    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front)."""
+def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False) -> Blocks:
+    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front); with
+    ``values``, those of the value statistics too (``gap.loopvalues``)."""
     rec, dropped = dropout.repair_episodes(rec)      # a dropout counts once: on its own
     conditions = rec.conditions()
     heading_known = bool(np.isfinite(rec.heading_deg).all())
@@ -50,9 +51,14 @@ def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
     parts.update(closednoise.episode_parts(rec, perturb_every))     # noise structure
     parts.update(dropped)
+    integer = False
+    if values:
+        more, integer = loopvalues.episode_parts(rec, np.unique(rec.episode))
+        parts.update(more)
     sums, layout = pack(parts, len(stratum))
     return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
-                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known})
+                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known,
+                                 'values': values, 'integer': integer})
 
 
 def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
@@ -113,7 +119,8 @@ def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
             h = b.part(sums, 'heading_band')[:, s].sum(axis=1)  # (R, 4): n, u^2, u dh, dh^2
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 2] / h[:, 1])
-        for more in (closednoise.stats, turnscatter.scatter_stats, dropout.closed_loop_stats):
+        for more in (closednoise.stats, turnscatter.scatter_stats, dropout.closed_loop_stats,
+                     loopvalues.stats):
             more_keys, more_cols = more(b, sums, s, c)
             keys += more_keys
             cols += more_cols

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import effects as fx
-from . import closednoise, dropout, fit
+from . import closednoise, dropout, fit, loopvalues
 from .target import Target
 from .where import Z_CAP, discrepancy
 
@@ -442,12 +442,15 @@ def _discrepancy_of(c, wanted) -> float:
 def _protocol(family: str) -> str:
     if family in dropout.FAMILIES:     # only a dropout moves them: they count on their own
         return 'dropout'
+    if family in loopvalues.FAMILIES:  # only a limit or a lattice moves them
+        return 'loop_values'
     if family in STATIONARY:
         return 'stationary'
     return 'closed_loop_noise' if family in closednoise.FAMILIES else 'closed_loop'
 
 
-PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout')   # see ``_protocol``
+PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout',
+         'loop_values')   # see ``_protocol``
 STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
               'spread_vs_level', 'step_response', 'mode_share', 'granularity',
               'pileup'}

@@ -80,7 +80,8 @@ def gain_offset(target: Target, c: Comparison) -> Candidate:
 
 def saturation(target: Target, c: Comparison) -> Candidate:
     name = fx.SaturationQuantization.name
-    grid_flag = {k.sensors[0] for k, r, s, se, z in _rows(c, 'granularity') if z > Z_DETECT}
+    grains = _rows(c, 'granularity') or _rows(c, 'loop_granularity')   # closed loop alone
+    grid_flag = {k.sensors[0] for k, r, s, se, z in grains if z > Z_DETECT}
     real = np.concatenate([r.readings for r in target.recordings])
     sim = np.concatenate([r.readings for r in target.simulate()])
     rec = target.recordings[0]
@@ -92,9 +93,9 @@ def saturation(target: Target, c: Comparison) -> Candidate:
         x, y = real[:, sensor], sim[:, sensor]
         x, y = x[np.isfinite(x)], y[np.isfinite(y)]
         lattice = _grid(x[(x > x.min()) & (x < x.max())])
-        # closed-loop statistics have no granularity: there the simulator's own readings
-        # not lying on the real lattice is the evidence
-        measured = sensor in grid_flag if _rows(c, 'granularity') else \
+        # without granularity statistics the simulator's own readings not lying on the
+        # real lattice is the evidence
+        measured = sensor in grid_flag if grains else \
             _grid(y[(y > y.min()) & (y < y.max())]) != lattice
         if lattice[0] > 1 and measured:
             grid[sensor] = lattice

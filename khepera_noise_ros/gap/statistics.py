@@ -308,9 +308,9 @@ def _shifted(lay: dict, hit: np.ndarray, partner: np.ndarray, lag: int):
     return lag, hit[:n - lag].copy(), lay['segments']
 
 
-def closed_loop_blocks(rec: Recording, perturb_every: int) -> Blocks:
+def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False) -> Blocks:
     """Per-episode sums of closed-loop Khepera data (``gap.closedloop``)."""
-    return _closed_loop_blocks(rec, perturb_every)
+    return _closed_loop_blocks(rec, perturb_every, values)
 
 
 def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stats:

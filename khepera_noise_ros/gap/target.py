@@ -54,7 +54,10 @@ class Target:
         if not self.block_lengths:
             self.block_lengths = [_block_length(r) for r in self.recordings]
         self.kinds = [replay.kind(r) for r in self.recordings]
-        self._real = [statistics.compute(_blocks(rec, n, self.config), self.replicates,
+        # closed loop alone: its value statistics stand in for the stationary ones
+        self.values = 'stationary' not in self.kinds
+        self._real = [statistics.compute(_blocks(rec, n, self.config, self.values),
+                                         self.replicates,
                                          self.seed + i)
                       for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
         self.real = _join(self._real)
@@ -88,7 +91,7 @@ class Target:
         copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
-            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config),
+            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.values),
                                    replicates, self.seed + 101 + i)
             stats.append(s)
             factors.append(self._level_inflation(i, sim, s, copies))
@@ -306,7 +309,8 @@ def _block_length(rec: Recording) -> int:
     return statistics.block_length(rec, rec.channels_used)
 
 
-def _blocks(rec: Recording, length: int, config: SimConfig) -> statistics.Blocks:
+def _blocks(rec: Recording, length: int, config: SimConfig,
+            values: bool = False) -> statistics.Blocks:
     if replay.kind(rec) == 'closed_loop':
-        return statistics.closed_loop_blocks(rec, config.task.perturb_every)
+        return statistics.closed_loop_blocks(rec, config.task.perturb_every, values)
     return statistics.stationary_blocks(rec, rec.channels_used, length)
