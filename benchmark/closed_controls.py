@@ -12,7 +12,6 @@ other) is a false one.  Last: the false effects per name.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
