@@ -1,13 +1,13 @@
-"""Value statistics of closed-loop recordings: the value lattice (``loop_granularity``) and
-the piles at each end (``loop_pileup``) of every sensor's readings, per condition.
+"""Value statistics of closed-loop recordings: the value lattice of every sensor's readings
+(``loop_granularity``), per condition.
 
-A lattice, a floor or a ceiling shows in any reading stream, whatever the heading, so
-these need no stationary robot.  Per episode (the closed loop's blocks) they are
-counts: readings strictly inside the sensor's range, those on its most common residue
-modulo each step of ``MODULI``, those at each end's pile (``gap.pileup``); the
-statistics are ratios of the resampled counts.  ``closedloop`` adds them only when a
-diagnosis has no stationary recording (``values``): there the stationary ones are
-missing; beside them these would repeat them.
+A lattice shows in any reading stream, whatever the heading, so it needs no stationary
+robot.  Per episode (the closed loop's blocks) the sums are weighted counts of the
+values inside a sensor's range and of those on its most common residue modulo each
+step of ``MODULI`` (each value seen counts once); the statistics are ratios of the
+resampled sums.  ``closedloop`` adds them only when a diagnosis has no stationary
+recording (``values``): beside one they would repeat its granularity.  (A pile-up
+statistic was tried and left out: docs/diagnosis.md.)
 """
 from __future__ import annotations
 
