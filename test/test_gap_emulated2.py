@@ -98,3 +98,20 @@ def test_leaving_the_robots_group_noise_out_raises_the_held_out_discrepancy(orac
                           all_six.discrepancy)
     assert rest.discrepancy > all_six.discrepancy + 50.0 and p < 0.05, \
         (rest.discrepancy, all_six.discrepancy, p)
+
+
+def test_given_the_robots_true_effects_the_papers_rounding_is_kept():
+    """The benchmark's robot truncates its noise as the paper's getnoise does and rounds
+    once at the end: rint(level + trunc(noise)) is rint(level) + trunc(noise), the
+    paper's rounding at the level.  Given the robot's true effects the value-lattice
+    statistics keep it (``gap.rounding``); before, with the level clipped, they chose
+    rounding at the reading (the pile at 525 it restored stood for the saturation)."""
+    import emulated_set as es
+    from khepera_noise_ros.gap import rounding
+    from khepera_noise_ros.reality.effects import EffectsConfig
+    config = EffectsConfig.real_robot()
+    recs = es.recordings(config, 3, 60, 2)[:1]
+    fit_part, _ = es.parts(recs, config)
+    choice = rounding.choose(fit_part, list(es.true_effects(config).values()))
+    assert choice['given'] == 'level' and choice['rounding'] == 'level', choice
+    assert choice['lattice']['level'] < choice['lattice']['reading'], choice
