@@ -169,7 +169,7 @@ def refit(config, name: str, samples: int, seed: int = 3) -> None:
     for k in range(len(others) + 1):
         given = a.with_given([true[n] for n in others[:k]])
         cand = fit.fit_one(name, given, given.compare(replicates=40))
-        print(f'  {name} given {others[:k] or "nothing"}: {cand.effect}')
+        print(f'  {name} given {others[:k] or "nothing"}: {cand.effect} ({cand.note})')
     print(f'  the robot\'s: {true[name]}')
 
 
