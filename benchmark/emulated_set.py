@@ -2,7 +2,8 @@
 
     python benchmark/emulated_set.py [--samples 60] [--episodes 30] [--seed 3]
                                      [--oracle-only] [--diagnose-only]
-                                     [--rounding level|reading]
+                                     [--rounding level|reading] [--alone NAME]
+                                     [--refit NAME]
 
 Recordings as test/test_gap_compound.py records them (stationary, ``--samples`` per
 heading and condition; closed loop, ``--episodes`` episodes, headings unknown).
@@ -13,6 +14,12 @@ oracle     the robot's own effects, with their true parameters, put into the
            An effect whose absence raises nothing beyond the noise cannot be found.
 diagnose   the diagnosis of the robot with one effect alone, and with every default
            effect but one: the single best effect and the compound chosen.
+refit      (``--refit NAME``) the default robot: NAME fitted on the fitting part given
+           none, then more and more of the robot's other effects with their true
+           parameters (does the fitter find the true shape once the others are right?)
+alone      (``--alone NAME``) the robot with only that effect and its sensor noise
+           against the simulator with the effect's true parameters, statistic family
+           by family: does the simulator's model reproduce the robot's process?
 
 ``--rounding`` is where the simulator rounds the reading ('level': the paper's,
 the default; 'reading': noise added to the unrounded level, as the robot does).
@@ -132,6 +139,54 @@ def oracle(config, recs, sim_seeds: int = 1) -> None:
               f'{r[:, 4].mean():+.2%} of none\'s')
 
 
+def effect_alone(config, name: str, samples: int, sim_seeds: int = 1,
+                 seed: int = 3) -> None:
+    """The robot with only ``name`` (and its sensor noise), stationary: the held-out
+    discrepancy by statistic family without the effect and with its true parameters."""
+    only = config.only(name)
+    recs = recordings(only, seed, samples, 2)[:1]
+    effect = true_effects(only)[name]
+    if name == 'temporal_drift':
+        _drift_states(only, effect, seed)
+    for sim_seed in range(sim_seeds):
+        _, b = parts(recs, only, sim_seed)
+        c0, c1 = b.compare(), b.compare([effect])
+        f0, f1 = dict(_by_family(c0)), dict(_by_family(c1))
+        fams = sorted(set(f0) | set(f1), key=lambda f: -(f0.get(f, 0) + f1.get(f, 0)))
+        print(f'  {name} alone, sim seed {sim_seed}: held-out none {c0.discrepancy:.0f}, true '
+              f'{c1.discrepancy:.0f}; by family (none -> true): ' + ', '.join(
+                  f'{f} {f0.get(f, 0):.0f} -> {f1.get(f, 0):.0f}' for f in fams[:8]))
+
+
+def refit(config, name: str, samples: int, seed: int = 3) -> None:
+    """``name`` fitted given the robot's other effects, true, one more at a time."""
+    from khepera_noise_ros.gap import fit
+    recs = recordings(config, seed, samples, 2)[:1]
+    a, _ = parts(recs, config)
+    true = true_effects(config)
+    others = [n for n in ('sensor_gain_offset', 'sensor_latency', 'correlated_noise',
+                          'temporal_drift', 'intensity_dependent_noise') if n != name]
+    for k in range(len(others) + 1):
+        given = a.with_given([true[n] for n in others[:k]])
+        cand = fit.fit_one(name, given, given.compare(replicates=40))
+        print(f'  {name} given {others[:k] or "nothing"}: {cand.effect} ({cand.note})')
+    print(f'  the robot\'s: {true[name]}')
+
+
+def _drift_states(config, effect, seed: int, n: int = 20_000) -> None:
+    """The robot's drift state and the simulator's over ``n`` samples: sd, lag-1."""
+    world = robot(config, seed)
+    drift = next(p for p in world._chain.chain if type(p).__name__ == 'Drift')
+    states = []
+    for _ in range(n):
+        world.read(0)
+        states.append(drift.state[0].copy())
+    sim = effect.over_time(np.ones((n, 8, 1)), np.random.default_rng(0))[:, :, 0] - 1.0
+    for label, x in (('robot', np.array(states)), ('simulator', sim)):
+        lag1 = np.mean([np.corrcoef(x[1:, k], x[:-1, k])[0, 1] for k in range(8)])
+        print(f'  drift state, {label}: sd {x.std(axis=0).mean():.5f}, lag-1 {lag1:.3f}')
+
+
 def _by_family(c) -> list:
     """[(statistic family, its part of the discrepancy)], largest first."""
     out: dict = {}
@@ -174,12 +229,29 @@ def main(argv=None) -> int:
     p.add_argument('--oracle-only', action='store_true')
     p.add_argument('--diagnose-only', action='store_true')
     p.add_argument('--rounding', choices=('level', 'reading'), default='level')
+    p.add_argument('--refit', default=None, metavar='NAME',
+                   help='only: NAME fitted given the robot\'s other true effects')
+    p.add_argument('--alone', default=None, metavar='NAME',
+                   help='only: the robot with this effect alone against its true parameters')
     p.add_argument('--effects', nargs='*', default=None,
                    help='effects to study alone and left out (default: every enabled one; none '
                         'given: none)')
     a = p.parse_args(argv)
     ROUNDING[0] = a.rounding
     robot_config = EffectsConfig.real_robot()
+    for flag in ('alone', 'refit'):
+        if getattr(a, flag) not in (None,) + robot_config.enabled:
+            print(f'--{flag} must be one of {list(robot_config.enabled)}, got '
+                  f'{getattr(a, flag)!r}', file=sys.stderr)
+            return 2
+    if a.refit is not None:
+        print(f'{a.samples} samples per cell, seed {a.seed}; simulator rounding {a.rounding}')
+        refit(robot_config, a.refit, a.samples, a.seed)
+        return 0
+    if a.alone is not None:
+        print(f'{a.samples} samples per cell, seed {a.seed}; simulator rounding {a.rounding}')
+        effect_alone(robot_config, a.alone, a.samples, a.sim_seeds, a.seed)
+        return 0
     print(f'recordings: {a.samples} samples per cell, {a.episodes} closed-loop episodes, '
           f'seed {a.seed}; simulator rounding {a.rounding}')
     recs = recordings(robot_config, a.seed, a.samples, a.episodes)

@@ -8,6 +8,7 @@ base values for any number of channels, for recordings of robots and boards the
 light model does not describe.  Both honour the noise model's ``rounding``: with
 'reading' the light level is not rounded before the noise; the effects of the
 reading stage act on the unrounded sum, which is rounded and clipped once at the end.
+With either, the level is not clipped before the noise: the reading saturates once.
 """
 from __future__ import annotations
 
@@ -128,7 +129,8 @@ def sense(base: np.ndarray, noise: NoiseModel, sensor_draws, group_draws, light:
     for apply in light:
         level = apply(level)
     if _rounds_level(noise):
-        level = np.clip(np.rint(level), 0.0, DARK).astype(np.float32)
+        # rounded, not clipped: the converter saturates the noisy reading (``_levels``)
+        level = np.rint(level).astype(np.float32)
         out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
     else:
         out = noise.added(np.asarray(level, np.float32), sensor_draws,
@@ -186,10 +188,13 @@ def _rounds_level(noise) -> bool:
 
 def _levels(level: np.ndarray, rounded: bool = True) -> np.ndarray:
     """(channels, samples x units) float32 light levels the model's noise acts on: rounded
-    and clipped unless the reading is rounded at the end."""
+    unless the reading is rounded at the end, never clipped.  A light-stage effect (a
+    gain, a flicker) can take the light beyond what the converter reads; the converter
+    saturates the noisy reading once, at the end, as a sensor does.  (Clipped before the
+    noise, a level beyond the range read the range's end plus noise, and half of those
+    readings fell back inside it.)"""
     if rounded:
         level = np.rint(level)
-        level = np.clip(level, 0.0, DARK, out=level)
     level = level.astype(np.float32)
     return np.ascontiguousarray(level.transpose(1, 0, 2)).reshape(level.shape[1], -1)
 
