@@ -23,6 +23,12 @@ def upper_products(y: np.ndarray) -> np.ndarray:
 DIGIT = 7     # bits per count when a block's 0/1 indicators are counted packed together
 
 
+def upper_of(y: np.ndarray) -> np.ndarray:
+    """``upper_products`` along the last axis of ``y`` (..., C): the same products."""
+    i, j = np.triu_indices(y.shape[-1])
+    return y[..., i] * y[..., j]
+
+
 def counted(block: tuple, nb: int, on_mode: np.ndarray, table: np.ndarray, at: np.ndarray,
             edge: np.ndarray) -> dict:
     """Per block and channel, how many samples are at the cell's mode, on each modal
@@ -118,7 +124,6 @@ def pile_ends(hist: np.ndarray) -> np.ndarray | None:
     channel spans 1e5 values or more (``pileup`` then finds its piles otherwise)."""
     channels, span = hist.shape
     out = np.zeros((span, channels, 2), bool)
-    v = np.arange(span)
     for k in range(channels):
         values = np.flatnonzero(hist[k])
         if values.size == 0:
@@ -130,8 +135,9 @@ def pile_ends(hist: np.ndarray) -> np.ndarray | None:
         tail = max(1, int(np.searchsorted(cum, pileup.TAIL * cum[-1])) + 1)
         piles = (values[np.argmax(counts[:tail])],
                  values[values.size - 1 - np.argmax(counts[::-1][:tail])])
-        for end, pile in enumerate(piles):
-            out[:, k, end] = np.abs(v - pile) <= pileup.WIDTH
+        for end, pile in enumerate(piles):      # the values within WIDTH of the pile
+            lo = max(int(np.ceil(pile - pileup.WIDTH)), 0)
+            out[lo:int(np.floor(pile + pileup.WIDTH)) + 1, k, end] = True
     return out
 
 

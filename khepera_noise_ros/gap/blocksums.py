@@ -22,21 +22,23 @@ class Segments:
     def __init__(self, starts: np.ndarray, targets: np.ndarray, n: int, rows: np.ndarray):
         sizes = np.diff(np.r_[starts, n]).astype(np.int64)
         self.largest = int(sizes.max()) if sizes.size else 0
-        self.groups = []                # (positions of the j-th row of each, output rows)
+        self.groups = []        # ((m, k) positions: the j-th row of each, output rows)
         for m in np.unique(sizes):
             first = starts[sizes == m]
-            self.groups.append(([first + j for j in range(int(m))],
+            self.groups.append((first[None, :] + np.arange(int(m))[:, None],
                                 rows[targets[sizes == m]]))
 
     def add(self, values, out: np.ndarray, cols: slice) -> None:
-        """``out[row, cols]`` = the sum of each block's ``values`` (a function of
-        positions giving (len, ...) rows), in their own precision, in reduceat's order."""
+        """``out[row, cols]`` = the sum of each block's ``values`` (a function of an (m, k)
+        array of positions giving (m, k, ...) rows), in their own precision, in
+        reduceat's order: the first row plus the others added one by one."""
         for at, rows in self.groups:
-            total = values(at[0])
-            if len(at) > 1:
-                rest = values(at[1])
-                for j in at[2:]:
-                    rest += values(j)
+            v = values(at)
+            total = v[0]
+            if len(v) > 1:
+                rest = v[1].copy()
+                for j in range(2, len(v)):
+                    rest += v[j]
                 total = total + rest
             out[rows, cols] = total.reshape(rows.size, -1)
 

@@ -160,7 +160,8 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     sums.add('sx', cut, blocksums.taken(xo))
     sums.add('s1', cut, blocksums.taken(yo))
     # cross products: the upper triangle only (``_cross`` fills in the rest after summing)
-    sums.add('s2', cut, lambda at: blockcounts.upper_products(rows(at)))
+    sums.add('s2', cut, lambda at: blockcounts.upper_products(y32) if at is None
+             else blockcounts.upper_of(rows(at)))
     sums.add('s4', cut, lambda at: np.square(np.square(rows(at))))
     _lagged(lay, y32, nb, sums)
     integer = bool(np.all(x == np.round(x)))
