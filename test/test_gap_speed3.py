@@ -8,7 +8,8 @@ Speed is ``benchmark/bench_diagnose.py``'s.
 import numpy as np
 import pytest
 
-from khepera_noise_ros.gap import blockcounts, blocksums, draws, pileup, simulate, statistics
+from khepera_noise_ros.gap import (blockcounts, blocksums, draws, dropout, pileup, rarecount,
+                                   simulate, statistics)
 from khepera_noise_ros.gap import effects as fx
 from test_gap_support import recorded, stationary_protocol, sums_both_ways
 
@@ -172,3 +173,27 @@ def test_a_replay_with_remembered_draws_equals_one_with_a_fresh_generator(monkey
     monkeypatch.setattr(draws, 'Remembered', lambda e: np.random.default_rng(list(e)))
     fresh = simulate.stationary(base, simulate.NoiseModel.independent_only(0.02), effects, 5)
     assert np.array_equal(first, fresh) and np.array_equal(again, fresh)
+
+
+def test_cross_products_of_gathered_rows_are_the_upper_products():
+    y = np.random.default_rng(4).normal(0, 30, (3, 50, 8)).astype(np.float32)
+    by_index = blockcounts.upper_of(y)
+    assert np.array_equal(by_index.reshape(-1, 36), blockcounts.upper_products(y.reshape(-1, 8)))
+
+
+def test_rare_counts_summed_in_place_are_the_counts_of_the_chosen_channels(monkeypatch):
+    rec = recorded(stationary_protocol(samples=13),
+                   [fx.SaturationQuantization((1, 4, 6), dropout=0.03)])
+    rec.manifest = dict(rec.manifest, channels_used=[6, 1, 4, 0])
+    rec = dropout.prepared(rec)
+    marks = dropout.known(rec.readings)[0]
+    assert marks[:, [1, 4, 6]].sum() > 10
+    fast = rarecount.counts([rec])
+    monkeypatch.setattr(rarecount, 'EXACT', 0)          # the plain way: pick, then sum
+    plain = rarecount.counts([rec])
+    assert fast == plain
+    hits = np.count_nonzero(marks[:, [6, 1, 4, 0]], axis=0)
+    for k, sensor in enumerate([6, 1, 4, 0]):
+        for end, name in enumerate(dropout.ENDS):
+            key = statistics.Key('dropout', (sensor,), None, name)
+            assert fast[key] == [float(hits[k, end]), float(len(rec))]
