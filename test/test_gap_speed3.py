@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.gap import (blockcounts, blocksums, draws, dropout, pileup, rarecount,
-                                   simulate, statistics)
+                                   resample, simulate, statistics)
 from khepera_noise_ros.gap import effects as fx
 from test_gap_support import recorded, stationary_protocol, sums_both_ways
 
@@ -197,3 +197,29 @@ def test_rare_counts_summed_in_place_are_the_counts_of_the_chosen_channels(monke
         for end, name in enumerate(dropout.ENDS):
             key = statistics.Key('dropout', (sensor,), None, name)
             assert fast[key] == [float(hits[k, end]), float(len(rec))]
+
+
+@pytest.mark.parametrize('effects', [(fx.SensorLatency((2,), 1),),
+                                     (fx.SaturationQuantization((1, 4), dropout=0.02),)])
+def test_resampled_sums_of_the_rare_parts_apart_equal_the_whole_product(effects):
+    rec = recorded(stationary_protocol(samples=13), effects)
+    blocks = statistics.stationary_blocks(rec, rec.channels_used, 5)
+    rare = blocks.extra['rare']
+    assert blocks.layout['dropped'][0].start == rare          # the rare parts come last
+    assert 0 < np.count_nonzero(blocks.sums[:, rare:].any(axis=1)) < len(blocks.stratum) / 2
+    whole = statistics.Blocks(blocks.kind, blocks.channels, blocks.strata, blocks.stratum,
+                              blocks.sums, blocks.layout, {'integer': True})
+    for replicates, seed in ((60, 1), (7, 2)):
+        resample._PICKS.clear()
+        apart = resample.resampled(blocks, replicates, seed)
+        resample._PICKS.clear()
+        plain = resample.resampled(whole, replicates, seed)
+        assert np.array_equal(apart, plain)
+        assert np.array_equal(np.signbit(apart), np.signbit(plain))
+    bad = statistics.Blocks(blocks.kind, blocks.channels, blocks.strata, blocks.stratum,
+                            blocks.sums.copy(), blocks.layout, dict(blocks.extra))
+    bad.sums[0, rare] = np.inf              # not finite: the whole product, undrawn kept
+    w = statistics.weights(bad, 40, np.random.default_rng(3))
+    resample._PICKS.clear()
+    assert np.array_equal(resample.resampled(bad, 40, 3), statistics.stratum_sums(bad, w),
+                          equal_nan=True)

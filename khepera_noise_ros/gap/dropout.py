@@ -109,7 +109,8 @@ def repair(x: np.ndarray, runs: list,
         # a value standing apart from all the sensor's other readings is no noise tail
         # however wide the noise, nor a level a moving light reaches: its readings need
         # only be isolated and ``AWAY`` from their neighbours
-        loose = (apart & ~keep).any() and _detached(xt[k], end, hits[end], k, finite)
+        loose = (apart & ~keep).any() and _detached(
+            xt[k], end, hits[end], k, finite, bounds[end][k + 1] - bounds[end][k])
         if loose:
             keep = apart
         if not keep.any():
@@ -211,26 +212,32 @@ def _local_test(xo, at, k, run_of, first, sizes, order=None) -> tuple:
     return far, lower, d, alone
 
 
-def _detached(col: np.ndarray, end: int, at_end: tuple, k: int, finite: bool = False) -> bool:
+def _detached(col: np.ndarray, end: int, at_end: tuple, k: int, finite: bool = False,
+              count: int | None = None) -> bool:
     """Does channel ``k``'s extreme value (``end``) stand apart: at least ``DETACHED_HITS``
     readings at it (``at_end``: the (channel, sample) hits at that end), and a gap to the
     next value inward of ``AWAY`` readings and ``DETACHED`` times the widest gap between
     the next ``SPACINGS`` distinct values inward?  A noise tail thins out value by value
     and a lattice's gaps are all alike; readings lost to one value beyond the reach of
     the noise (525 beside a dark level of 500 whose noise stops at 510) leave a gap;
-    ``finite``: every reading of ``col`` is known to be finite."""
-    if np.count_nonzero(at_end[0] == k) < DETACHED_HITS:
+    ``finite``: every reading of ``col`` is known to be finite; ``count``: the hits of
+    channel ``k`` in ``at_end``, if known."""
+    if (np.count_nonzero(at_end[0] == k) if count is None else count) < DETACHED_HITS:
         return False
     x = col if finite else col[np.isfinite(col)]
-    x = x if end == 0 else -x
-    rest = x[x > x.min()]
+    if end == 0:
+        low = x.min()
+        rest = x[x > low]
+    else:       # the same values as negating every reading first, fewer negated
+        low = -x.max()
+        rest = -x[x < -low]
     m = min(rest.size, 64 * (SPACINGS + 1))
     if m < SPACINGS + 1:
         return False
     near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
     if near.size < 3:
         return False
-    gap = near[0] - x.min()
+    gap = near[0] - low
     return bool(gap >= AWAY and gap >= DETACHED * np.diff(near).max())
 
 

@@ -178,8 +178,9 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         sums.put_at('dropped', np.zeros(0, np.int64), np.zeros(0))
     _transitions(rec, lay, x, run_means, sums)
     table, layout = sums.done(_block_sum, pack)
+    # the parts from 'dropped' on are zero in all but a few blocks (``resample._picked``)
     return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], table,
-                  layout, {'integer': integer})
+                  layout, {'integer': integer, 'rare': layout['dropped'][0].start})
 
 
 def _shapes(c: int) -> dict:
