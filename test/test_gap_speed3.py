@@ -223,3 +223,26 @@ def test_resampled_sums_of_the_rare_parts_apart_equal_the_whole_product(effects)
     resample._PICKS.clear()
     assert np.array_equal(resample.resampled(bad, 40, 3), statistics.stratum_sums(bad, w),
                           equal_nan=True)
+
+
+@pytest.mark.parametrize('length', [5, 3])
+def test_a_column_major_table_gives_the_same_sums_and_statistics(length):
+    rec = recorded(stationary_protocol(samples=100),
+                   [fx.TemporalDrift((0, 2), 0.03, 5.0), fx.SensorLatency((3,), 1)])
+    rows = statistics.stationary_blocks(rec, rec.channels_used, length)
+    cols = statistics.stationary_blocks(rec, rec.channels_used, length, column_major=True)
+    assert cols.sums.flags['F_CONTIGUOUS'] and rows.sums.flags['C_CONTIGUOUS']
+    assert np.array_equal(rows.sums, cols.sums)
+    assert max(np.diff(rows.edges)) > 128           # strata of many blocks: pairwise sums
+    by_rows, by_cols = statistics.compute(rows, 0), statistics.compute(cols, 0)
+    assert by_rows.keys == by_cols.keys
+    assert np.array_equal(by_rows.values, by_cols.values, equal_nan=True)
+    assert np.array_equal(resample.stratum_sums(rows, np.ones((1, len(rows.stratum)))),
+                          resample.stratum_sums(cols, np.ones((1, len(cols.stratum)))))
+
+
+def test_a_part_of_the_table_is_written_in_place():
+    packer = blocksums.Packer({'a': (2,), 'b': (3, 2)}, 4, np.arange(4), np.arange(4),
+                              column_major=True)
+    packer.view('b')[:, 1, 0] = 7.0
+    assert packer.out[:, 2 + 2].tolist() == [7.0] * 4 and packer.out.sum() == 28.0

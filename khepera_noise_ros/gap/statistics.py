@@ -114,8 +114,11 @@ def _layout(rec: Recording, length: int) -> dict:
     return out
 
 
-def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
-    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
+def stationary_blocks(rec: Recording, channels, length: int,
+                      column_major: bool = False) -> Blocks:
+    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples;
+    ``column_major``: the table stored column by column where it is made directly (for
+    the full data's sums alone, ``blocksums.Packer``): the same numbers."""
     channels = tuple(channels)
     lay = _layout(rec, length)
     labels = lay['labels']
@@ -151,7 +154,7 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
         lay['direct'] = 0 < lay['largest'] <= blocksums.SEQUENTIAL
     cut = _cut(lay) if lay['direct'] else block
     sums = blocksums.Packer(_shapes(len(channels)), nb, lay['by_stratum'],
-                            lay['rows'] if lay['direct'] else None)
+                            lay['rows'] if lay['direct'] else None, column_major)
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
     y32 = yo.astype(np.float32)

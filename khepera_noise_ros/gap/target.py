@@ -88,7 +88,8 @@ class Target:
         copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
-            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config),
+            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config,
+                                           replicates == 0),
                                    replicates, self.seed + 101 + i)
             stats.append(s)
             factors.append(self._level_inflation(i, sim, s, copies))
@@ -306,7 +307,10 @@ def _block_length(rec: Recording) -> int:
     return statistics.block_length(rec, rec.channels_used)
 
 
-def _blocks(rec: Recording, length: int, config: SimConfig) -> statistics.Blocks:
+def _blocks(rec: Recording, length: int, config: SimConfig,
+            column_major: bool = False) -> statistics.Blocks:
+    """The block sums of ``rec``; ``column_major``: only the full data's sums are wanted
+    (no replicates), which are added faster down contiguous columns."""
     if replay.kind(rec) == 'closed_loop':
         return statistics.closed_loop_blocks(rec, config.task.perturb_every)
-    return statistics.stationary_blocks(rec, rec.channels_used, length)
+    return statistics.stationary_blocks(rec, rec.channels_used, length, column_major)
