@@ -181,15 +181,18 @@ def stationary_blocks(rec: Recording, channels, length: int,
         sums.put_at('dropped', np.zeros(0, np.int64), np.zeros(0))
     _transitions(rec, lay, x, run_means, sums)
     table, layout = sums.done(_block_sum, pack)
-    # the parts from 'dropped' on are zero in all but a few blocks (``resample._picked``)
+    # counts from 'n' on, then parts zero in all but a few blocks (``resample._picked``)
     return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], table,
-                  layout, {'integer': integer, 'rare': layout['dropped'][0].start})
+                  layout, {'integer': integer, 'counts': layout['n'][0].start,
+                           'rare': layout['dropped'][0].start})
 
 
 def _shapes(c: int) -> dict:
-    """The parts of the stationary block sums and their per-block shapes, in table order."""
-    return {'n': (1,), 'sx': (c,), 's1': (c,), 's2': (c * (c + 1) // 2,), 's4': (c,),
-            'lag_n': (len(LAGS),), 'lag_s': (len(LAGS), c), 'at_mode': (c,),
+    """The parts of the stationary block sums and their per-block shapes, in table order:
+    sums of readings, then counts (whole numbers, from 'n'), then the parts that are zero
+    in all but a few blocks (from 'dropped'; ``resample._picked`` uses the order)."""
+    return {'sx': (c,), 's1': (c,), 's2': (c * (c + 1) // 2,), 's4': (c,),
+            'lag_s': (len(LAGS), c), 'n': (1,), 'lag_n': (len(LAGS),), 'at_mode': (c,),
             'residue': (c, len(MODULI)), 'edge': (c, 2), 'dropped': (c, 2),
             'step_dd': (STEP_LAGS, c), 'step_d2': (STEP_LAGS, c)}
 
