@@ -121,23 +121,31 @@ def pile_ends(hist: np.ndarray) -> np.ndarray | None:
     channel's histogram ``hist`` (C, span) of integer readings (the same piles: the most
     common value among each end's outermost ``pileup.TAIL`` of the readings, the
     outermost of equals, and the values within ``pileup.WIDTH`` of it); None when a
-    channel spans 1e5 values or more (``pileup`` then finds its piles otherwise)."""
+    channel spans 1e5 values or more (``pileup`` then finds its piles otherwise).
+
+    All channels at once: the values up to the first whose cumulative count reaches the
+    tail's share are the low tail; the high tail is as many distinct values from the top
+    (``pileup`` counts them once, from the low end); the first largest count in a tail is
+    its pile (empty values never win)."""
     channels, span = hist.shape
     out = np.zeros((span, channels, 2), bool)
-    for k in range(channels):
-        values = np.flatnonzero(hist[k])
-        if values.size == 0:
-            continue
-        if values[-1] - values[0] >= 1e5:
-            return None
-        counts = hist[k, values]
-        cum = np.cumsum(counts)
-        tail = max(1, int(np.searchsorted(cum, pileup.TAIL * cum[-1])) + 1)
-        piles = (values[np.argmax(counts[:tail])],
-                 values[values.size - 1 - np.argmax(counts[::-1][:tail])])
-        for end, pile in enumerate(piles):      # the values within WIDTH of the pile
-            lo = max(int(np.ceil(pile - pileup.WIDTH)), 0)
-            out[lo:int(np.floor(pile + pileup.WIDTH)) + 1, k, end] = True
+    seen = hist > 0
+    used = seen.any(axis=1)
+    if not used.any():
+        return out
+    low = np.argmax(seen, axis=1)
+    high = span - 1 - np.argmax(seen[:, ::-1], axis=1)
+    if (used & (high - low >= 1e5)).any():
+        return None
+    v = np.arange(span)
+    cum = np.cumsum(hist, axis=1)
+    reach = np.argmax(cum >= pileup.TAIL * cum[:, -1:], axis=1)       # the low tail's last
+    tail = np.cumsum(seen, axis=1)[np.arange(channels), reach]         # its distinct values
+    low_pile = np.argmax(np.where(v[None, :] <= reach[:, None], hist, -1), axis=1)
+    top = np.cumsum(seen[:, ::-1], axis=1)                # distinct values from the top
+    high_pile = span - 1 - np.argmax(np.where(top <= tail[:, None], hist[:, ::-1], -1), axis=1)
+    for end, pile in enumerate((low_pile, high_pile)):   # the values within WIDTH of it
+        out[:, :, end] = (np.abs(v[:, None] - pile[None, :]) <= pileup.WIDTH) & used[None, :]
     return out
 
 
