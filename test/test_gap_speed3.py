@@ -246,3 +246,42 @@ def test_a_part_of_the_table_is_written_in_place():
                               column_major=True)
     packer.view('b')[:, 1, 0] = 7.0
     assert packer.out[:, 2 + 2].tolist() == [7.0] * 4 and packer.out.sum() == 28.0
+
+
+def _detached_plain(col, end, at_end, k) -> bool:
+    """The value-apart test as it was: every reading filtered and negated first."""
+    if np.count_nonzero(at_end[0] == k) < dropout.DETACHED_HITS:
+        return False
+    x = col[np.isfinite(col)]
+    x = x if end == 0 else -x
+    rest = x[x > x.min()]
+    m = min(rest.size, 64 * (dropout.SPACINGS + 1))
+    if m < dropout.SPACINGS + 1:
+        return False
+    near = np.unique(np.partition(rest, m - 1)[:m])[:dropout.SPACINGS + 1]
+    if near.size < 3:
+        return False
+    gap = near[0] - x.min()
+    return bool(gap >= dropout.AWAY and gap >= dropout.DETACHED * np.diff(near).max())
+
+
+def test_the_value_apart_test_with_known_count_and_finiteness_is_the_plain_one():
+    rng = np.random.default_rng(9)
+    answers = set()
+    for _ in range(400):
+        x = _integer_columns(rng)
+        if rng.random() < 0.3:          # a value lost beyond the noise's reach
+            x[rng.integers(0, x.shape[0], 5), 0] = rng.choice([x.min() - 30, x.max() + 30])
+        if rng.random() < 0.1:
+            x[rng.integers(0, x.shape[0]), -1] = np.nan
+        xt = np.ascontiguousarray(x.T)
+        finite = bool(np.isfinite(x).all())
+        for end in (0, 1):
+            value = np.nanmin(x, axis=0) if end == 0 else np.nanmax(x, axis=0)
+            hits = np.nonzero(xt == value[:, None])
+            for k in range(x.shape[1]):
+                count = int(np.count_nonzero(hits[0] == k))
+                fast = dropout._detached(xt[k], end, hits, k, finite, count)
+                assert fast == _detached_plain(xt[k], end, hits, k)
+                answers.add(fast)
+    assert answers == {True, False}
