@@ -72,20 +72,23 @@ def repair(x: np.ndarray, runs: list,
     if geometry is None or x.size == 0:
         return x, out, np.full((x.shape[1], 2), np.nan)
     xt = np.ascontiguousarray(x.T)   # channel by channel: 3x faster than down the columns
+    finite = False
     if np.isnan(x).any():
         with np.errstate(invalid='ignore'), warnings.catch_warnings():
             warnings.simplefilter('ignore', RuntimeWarning)     # a channel all NaN
             ends = np.stack([np.nanmin(x, axis=0), np.nanmax(x, axis=0)], axis=1)
     else:
         ends = np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1)
+        finite = bool(np.isfinite(ends).all())      # no NaN, no infinity: every reading
     order, sizes, first, run_of, place = geometry
     repaired = x
     hits = [np.nonzero(xt == ends[:, end, None]) for end in (0, 1)]   # one pass each
+    # hits come channel by channel: each channel's are a slice
+    bounds = [np.searchsorted(h[0], np.arange(x.shape[1] + 1)) for h in hits]
     todo = []                                       # (channel, end, positions)
     for k in range(x.shape[1]):
         for end in (0, 1):
-            channel, sample = hits[end]
-            i = place[sample[channel == k]]
+            i = place[hits[end][1][bounds[end][k]:bounds[end][k + 1]]]
             i = np.sort(i[i >= 0])
             if i.size == 0 or (moving and _stretched(i, run_of)):
                 continue
@@ -106,13 +109,14 @@ def repair(x: np.ndarray, runs: list,
         # a value standing apart from all the sensor's other readings is no noise tail
         # however wide the noise, nor a level a moving light reaches: its readings need
         # only be isolated and ``AWAY`` from their neighbours
-        loose = (apart & ~keep).any() and _detached(xt[k], end, hits[end], k)
+        loose = (apart & ~keep).any() and _detached(
+            xt[k], end, hits[end], k, finite, bounds[end][k + 1] - bounds[end][k])
         if loose:
             keep = apart
         if not keep.any():
             continue
         if k not in cols:     # the local levels (both ends of a channel share them)
-            col = x[order, k].astype(np.float64)
+            col = xt[k][order].astype(np.float64)
             cols[k] = (col, _deviations(col, run_of, first, sizes))
         i, low = i[keep], low[keep]
         far = np.ones(i.size, bool) if loose else \
@@ -208,25 +212,32 @@ def _local_test(xo, at, k, run_of, first, sizes, order=None) -> tuple:
     return far, lower, d, alone
 
 
-def _detached(col: np.ndarray, end: int, at_end: tuple, k: int) -> bool:
+def _detached(col: np.ndarray, end: int, at_end: tuple, k: int, finite: bool = False,
+              count: int | None = None) -> bool:
     """Does channel ``k``'s extreme value (``end``) stand apart: at least ``DETACHED_HITS``
     readings at it (``at_end``: the (channel, sample) hits at that end), and a gap to the
     next value inward of ``AWAY`` readings and ``DETACHED`` times the widest gap between
     the next ``SPACINGS`` distinct values inward?  A noise tail thins out value by value
     and a lattice's gaps are all alike; readings lost to one value beyond the reach of
-    the noise (525 beside a dark level of 500 whose noise stops at 510) leave a gap."""
-    if np.count_nonzero(at_end[0] == k) < DETACHED_HITS:
+    the noise (525 beside a dark level of 500 whose noise stops at 510) leave a gap;
+    ``finite``: every reading of ``col`` is known to be finite; ``count``: the hits of
+    channel ``k`` in ``at_end``, if known."""
+    if (np.count_nonzero(at_end[0] == k) if count is None else count) < DETACHED_HITS:
         return False
-    x = col[np.isfinite(col)]
-    x = x if end == 0 else -x
-    rest = x[x > x.min()]
+    x = col if finite else col[np.isfinite(col)]
+    if end == 0:
+        low = x.min()
+        rest = x[x > low]
+    else:       # the same values as negating every reading first, fewer negated
+        low = -x.max()
+        rest = -x[x < -low]
     m = min(rest.size, 64 * (SPACINGS + 1))
     if m < SPACINGS + 1:
         return False
     near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
     if near.size < 3:
         return False
-    gap = near[0] - x.min()
+    gap = near[0] - low
     return bool(gap >= AWAY and gap >= DETACHED * np.diff(near).max())
 
 

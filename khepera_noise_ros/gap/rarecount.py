@@ -30,6 +30,7 @@ COUNT_SAMPLES = 48_000      # simulated readings per sensor aimed at for the cou
 MAX_COPIES = 20             # ... with at most this many copies of the recordings
 KNOWN = 20                  # simulated events that make the simulator's rate known
 EVENTS = 2                  # real events that more simulated copies can make evidence of
+EXACT = 1 << 24             # marks summed in single precision are exact counts below this
 
 
 def counts(recordings: list) -> dict:
@@ -50,7 +51,10 @@ def counts(recordings: list) -> dict:
             family, channels = 'dropout', tuple(rec.channels_used)
             groups = [(None, slice(None))]
         for condition, rows in groups:
-            hit = marks[rows][:, list(channels)].sum(axis=0)          # (C, 2)
+            # 0/1 marks: sums of fewer than 2 ** 24 are exact counts, whichever are added
+            # first, so all channels are summed in place and then picked (no copy)
+            hit = marks[rows].sum(axis=0)[list(channels)] if marks.shape[0] < EXACT \
+                else marks[rows][:, list(channels)].sum(axis=0)        # (C, 2)
             n = float(np.count_nonzero(rows) if condition is not None else marks.shape[0])
             for key, value in dropout.shares(family, channels, condition, hit[None] / n):
                 pooled = len(key.sensors) > 1

@@ -43,8 +43,8 @@ def stratum_sums(blocks: Blocks, w: np.ndarray) -> np.ndarray:
     # rows by replicate); built directly in CSR form.  Blocks a replicate did not draw
     # (weight 0, a third of them) are left out: adding 0 x a finite sum changes nothing,
     # so only when every sum is finite.
-    pick = _selection(blocks.edges, w, bool(np.isfinite(blocks.sums.sum())))
-    return _picked(pick, blocks, r)
+    finite = bool(np.isfinite(blocks.sums.sum()))
+    return _picked(_selection(blocks.edges, w, finite), blocks, r, finite)
 
 
 def _selection(edges: np.ndarray, w: np.ndarray, finite: bool):
@@ -61,9 +61,52 @@ def _selection(edges: np.ndarray, w: np.ndarray, finite: bool):
     return sparse.csr_matrix((data, col, indptr), shape=(r * strata, b))
 
 
-def _picked(pick, blocks: Blocks, r: int) -> np.ndarray:
-    out = np.asarray(pick @ blocks.sums).reshape(len(blocks.strata), r, -1)
+def _picked(pick, blocks: Blocks, r: int, finite: bool) -> np.ndarray:
+    """(R, S, D) sums of the blocks ``pick`` selects (its rows: stratum by replicate).
+
+    The sum of each column is its own (the product adds each column's terms in the same
+    order, whatever the other columns), so parts may be summed apart.  Counts (the
+    columns from ``blocks.extra['counts']`` to ``'rare'``: whole numbers, as are the
+    weights) are exact in any order: a dense product per stratum.  The columns from
+    ``'rare'`` on, parts that are zero in all but a few blocks (dropouts, step
+    responses), are summed over the blocks where they are not zero: the terms left out
+    are zeros (a finite weight times 0), and adding a zero changes no sum (never -0:
+    sums start at +0).  Only when every sum is finite (else 0 x inf would be NaN)."""
+    rare = blocks.extra.get('rare') if finite else None
+    if rare is None:
+        out = np.asarray(pick @ blocks.sums)
+    else:
+        counts = blocks.extra.get('counts', rare)
+        out = np.empty((pick.shape[0], blocks.sums.shape[1]))
+        out[:, :counts] = pick @ np.ascontiguousarray(blocks.sums[:, :counts])
+        if counts < rare:
+            out[:, counts:rare] = _whole(pick, blocks, r, counts, rare)
+        tail = blocks.sums[:, rare:]
+        rows = np.flatnonzero(tail.any(axis=1))
+        out[:, rare:] = (pick[:, rows] @ tail[rows]) if rows.size else 0.0
+    out = out.reshape(len(blocks.strata), r, -1)
     return np.ascontiguousarray(out.transpose(1, 0, 2))
+
+
+_DENSE: OrderedDict = OrderedDict()
+
+
+def _whole(pick, blocks: Blocks, r: int, a: int, b: int) -> np.ndarray:
+    """``pick @ blocks.sums[:, a:b]`` for columns of whole numbers: each stratum's dense
+    weights (R, its blocks), made once per selection matrix, times its blocks."""
+    hit = _DENSE.get(id(pick))
+    if hit is None or hit[0] is not pick:
+        edges = blocks.edges
+        dense = [pick[s * r:(s + 1) * r, lo:hi].toarray()
+                 for s, (lo, hi) in enumerate(zip(edges[:-1], edges[1:]))]
+        hit = _DENSE[id(pick)] = (pick, dense)
+        if len(_DENSE) > PICK_CACHE:
+            _DENSE.popitem(last=False)
+    x = blocks.sums[:, a:b]
+    out = np.empty((pick.shape[0], b - a))
+    for s, (lo, hi) in enumerate(zip(blocks.edges[:-1], blocks.edges[1:])):
+        out[s * r:(s + 1) * r] = hit[1][s] @ x[lo:hi]
+    return out
 
 
 _PICKS: OrderedDict = OrderedDict()
@@ -86,7 +129,7 @@ def resampled(blocks: Blocks, replicates: int, seed: int) -> np.ndarray:
             _PICKS.popitem(last=False)
     else:
         _PICKS.move_to_end(key)
-    return _picked(pick, blocks, 1 + replicates)
+    return _picked(pick, blocks, 1 + replicates, finite)
 
 
 @functools.lru_cache(maxsize=8)

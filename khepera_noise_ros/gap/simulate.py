@@ -22,6 +22,7 @@ from ..core.khepera import DARK, SENSORS, TENTHS, World, to_tenths
 from ..core.noise import NoiseModel
 from ..core.task import Episodes, Task
 from ..core.streams import UNIT
+from . import draws
 
 
 def _staged(effects, stage: str) -> list:
@@ -149,7 +150,7 @@ def stationary(base: np.ndarray, noise: NoiseModel, effects=(), seed: int = 0) -
     The model's dependence groups must lie within the channels; effects may name any.
     """
     samples, channels, robots = base.shape
-    rng = np.random.default_rng(_entropy(seed))
+    rng = draws.Remembered(_entropy(seed))    # the generator, its draws remembered
     rounded = _rounds_level(noise)
     light = _staged(effects, 'light')
     if light or base.flags.writeable:

@@ -20,7 +20,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..recording import Recording
-from . import blockcounts, blocklength, dropout, pileup
+from . import blockcounts, blocklength, blocksums, dropout, pileup
 from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 from .resample import resampled, stratum_sums, weights  # noqa: F401 (re-exported)
@@ -114,11 +114,14 @@ def _layout(rec: Recording, length: int) -> dict:
     return out
 
 
-def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
-    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples."""
+def stationary_blocks(rec: Recording, channels, length: int,
+                      column_major: bool = False) -> Blocks:
+    """Sufficient sums of stationary data in blocks of ``length`` consecutive samples;
+    ``column_major``: the table stored column by column where it is made directly (for
+    the full data's sums alone, ``blocksums.Packer``): the same numbers."""
     channels = tuple(channels)
     lay = _layout(rec, length)
-    labels, cell = lay['labels'], lay['cell']
+    labels = lay['labels']
     order, nb = lay['order'], lay['nb']
     if 'segments' not in lay:
         lay['segments'] = _segments(lay['block'], nb)
@@ -143,70 +146,88 @@ def stationary_blocks(rec: Recording, channels, length: int) -> Blocks:
     def inorder(a: np.ndarray) -> np.ndarray:
         return a if lay['sorted'] else a[order]
     yo, xo = inorder(y), inorder(x)
+    if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
+        lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
+    if 'largest' not in lay:
+        lay['largest'] = int(np.bincount(lay['block']).max()) if nb else 0
+    if 'direct' not in lay:      # blocks short enough to be added straight into the table
+        lay['direct'] = 0 < lay['largest'] <= blocksums.SEQUENTIAL
+    cut = _cut(lay) if lay['direct'] else block
+    sums = blocksums.Packer(_shapes(len(channels)), nb, lay['by_stratum'],
+                            lay['rows'] if lay['direct'] else None, column_major)
     # products in single precision (sums over a block of at most a few hundred samples
     # keep 6 digits), levels and first moments in double
     y32 = yo.astype(np.float32)
+    rows = blocksums.taken(y32)
+    sums.put('n', np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64))
+    sums.add('sx', cut, blocksums.taken(xo))
+    sums.add('s1', cut, blocksums.taken(yo))
     # cross products: the upper triangle only (``_cross`` fills in the rest after summing)
-    parts = {'n': np.bincount(lay['block'], minlength=nb)[:, None].astype(np.float64),
-             'sx': _block_sum(block, xo, nb),
-             's1': _block_sum(block, yo, nb),
-             's2': _block_sum(block, blockcounts.upper_products(y32), nb),
-             's4': _block_sum(block, np.square(np.square(y32)), nb)}
-    parts['lag_n'], parts['lag_s'] = _lagged(lay, y32, nb)
+    sums.add('s2', cut, lambda at: blockcounts.upper_products(y32) if at is None
+             else blockcounts.upper_of(rows(at)))
+    sums.add('s4', cut, lambda at: np.square(np.square(rows(at))))
+    _lagged(lay, y32, nb, sums)
     integer = bool(np.all(x == np.round(x)))
     if integer:
-        low = int(x.min()) if x.size else 0
-        xi = (x - low).astype(np.int64) if x.size else np.zeros(x.shape, np.int64)
-        span = int(xi.max()) + 1 if x.size else 1
-        modes = blockcounts.cell_modes(xi, cell, len(labels), span) + low
-        on_mode = xo == modes[inorder(cell)]
-        table = blockcounts.on_modal_residue(xi, low, span, MODULI).reshape(
-            span * len(channels), len(MODULI))
-        at = inorder(xi) * len(channels) + np.arange(len(channels))[None, :]
-        edge = inorder(pileup.edge_hits(x))
-        if 'largest' not in lay:
-            lay['largest'] = int(np.bincount(lay['block']).max()) if nb else 0
-        if lay['largest'] < 1 << blockcounts.DIGIT:
-            parts.update(blockcounts.counted(block, nb, on_mode, table, at, edge))
-        else:
-            parts['at_mode'] = _block_sum(block, on_mode.astype(np.float32), nb)
-            parts['residue'] = _block_sum(block, np.take(table, at, axis=0), nb)
-            parts['edge'] = _block_sum(block, edge, nb)
+        cells = (len(lay['labels']), lay['cell'], inorder(lay['cell']))
+        blockcounts.count(x, xo, inorder, cells, MODULI, sums, cut, lay['largest'])
     else:
-        parts['at_mode'] = _block_sum(block, np.zeros(xo.shape, np.float32), nb)
-        parts['residue'] = _block_sum(block, np.zeros(xo.shape + (len(MODULI),), np.float32),
-                                      nb)
-        parts['edge'] = _block_sum(block, inorder(pileup.edge_hits(x)), nb)
+        # at_mode and residue: not counted, zeros
+        sums.add('edge', cut, blocksums.taken(inorder(pileup.edge_hits(x))))
     # no dropout marks (most replays): their block sums are zeros, no need to add them
-    parts['dropped'] = _block_sum(block, inorder(dropped), nb) if dropped.any() else \
-        np.zeros((nb,) + dropped.shape[1:])
-    parts['step_dd'], parts['step_d2'] = _transitions(rec, lay, x, nb, run_means)
-    if 'by_stratum' not in lay:       # blocks in stratum order, as ``Blocks`` keeps them
-        lay['by_stratum'] = np.argsort(lay['stratum'], kind='stable')
-    sums, layout = pack(parts, nb, lay['by_stratum'])
-    return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], sums,
-                  layout, {'integer': integer})
+    if dropped.any():
+        sums.add('dropped', cut, blocksums.taken(inorder(dropped)))
+    else:
+        sums.put_at('dropped', np.zeros(0, np.int64), np.zeros(0))
+    _transitions(rec, lay, x, run_means, sums)
+    table, layout = sums.done(_block_sum, pack)
+    # counts from 'n' on, then parts zero in all but a few blocks (``resample._picked``)
+    return Blocks('stationary', channels, labels, lay['stratum'][lay['by_stratum']], table,
+                  layout, {'integer': integer, 'counts': layout['n'][0].start,
+                           'rare': layout['dropped'][0].start})
 
 
-def _transitions(rec: Recording, lay: dict, x: np.ndarray, blocks: int,
-                 run_means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _shapes(c: int) -> dict:
+    """The parts of the stationary block sums and their per-block shapes, in table order:
+    sums of readings, then counts (whole numbers, from 'n'), then the parts that are zero
+    in all but a few blocks (from 'dropped'; ``resample._picked`` uses the order)."""
+    return {'sx': (c,), 's1': (c,), 's2': (c * (c + 1) // 2,), 's4': (c,),
+            'lag_s': (len(LAGS), c), 'n': (1,), 'lag_n': (len(LAGS),), 'at_mode': (c,),
+            'residue': (c, len(MODULI)), 'edge': (c, 2), 'dropped': (c, 2),
+            'step_dd': (STEP_LAGS, c), 'step_d2': (STEP_LAGS, c)}
+
+
+def _cut(lay: dict) -> blocksums.Segments:
+    """The blocks as ``blocksums.Segments`` of the samples in block order, each summed
+    into its row of the stratum-ordered table (once per protocol)."""
+    if 'cut' not in lay:
+        lay['rows'] = np.empty(lay['nb'], np.int64)
+        lay['rows'][lay['by_stratum']] = np.arange(lay['nb'])
+        starts, targets, _ = lay['segments']
+        lay['cut'] = blocksums.Segments(starts, targets, lay['order'].size, lay['rows'])
+    return lay['cut']
+
+
+def _transitions(rec: Recording, lay: dict, x: np.ndarray, run_means: np.ndarray,
+                 sums: blocksums.Packer) -> None:
     """Step responses where a run follows another in the same episode without a gap.
 
     For the j-th sample after the change, d = x - (new run's mean) against the change
     D = (old mean) - (new mean): sums of d * D and D^2 per channel, credited to the
-    block of the new run's first sample.  d / D is 0 for a sensor that follows the
-    change at once and 1 while it still reports the old heading.
+    block of the new run's first sample (parts ``step_dd``, ``step_d2``).  d / D is 0
+    for a sensor that follows the change at once and 1 while it still reports the old
+    heading.
     """
-    dd = np.zeros((blocks, STEP_LAGS, x.shape[1]))
-    d2 = np.zeros((blocks, STEP_LAGS, x.shape[1]))
     if 'changes' not in lay:
         lay['changes'] = _changes(rec, lay['runs'], lay['block_of'])
     at, samples, old, new = lay['changes']
+    dd = d2 = np.zeros((0, STEP_LAGS, x.shape[1]))
     if at.size:      # each change has a block of its own
         change = run_means[old] - run_means[new]
-        dd[at] += (x[samples] - run_means[new][:, None, :]) * change[:, None, :]
-        d2[at] += (change ** 2)[:, None, :]
-    return dd, d2
+        dd = (x[samples] - run_means[new][:, None, :]) * change[:, None, :]
+        d2 = np.broadcast_to((change ** 2)[:, None, :], dd.shape)
+    sums.put_at('step_dd', at, dd)
+    sums.put_at('step_d2', at, d2)
 
 
 def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tuple:
@@ -265,9 +286,9 @@ def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list:
     return out
 
 
-def _lagged(lay: dict, y: np.ndarray, blocks: int) -> tuple[np.ndarray, np.ndarray]:
+def _lagged(lay: dict, y: np.ndarray, blocks: int, sums: blocksums.Packer) -> None:
     """Products of residues ``lag`` steps apart in the same run, credited to the block of
-    the first sample: (blocks, lags) counts and (blocks, lags, C) sums."""
+    the first sample: (blocks, lags) counts ``lag_n`` and (blocks, lags, C) sums ``lag_s``."""
     if 'lag_segments' not in lay:       # the same for every replay of the protocol
         lay['lag_segments'] = [(np.bincount(lay['block'][hit], minlength=blocks),
                                 _segments(lay['block'][hit], blocks))
@@ -275,19 +296,45 @@ def _lagged(lay: dict, y: np.ndarray, blocks: int) -> tuple[np.ndarray, np.ndarr
     if 'lag_shifts' not in lay:     # each partner ``lag`` rows on: products of shifted rows
         lay['lag_shifts'] = [_shifted(lay, hit, partner, lag)
                              for lag, (hit, partner) in zip(LAGS, lay['lags'])]
-    counts = np.zeros((blocks, len(LAGS)))
-    sums = np.zeros((blocks, len(LAGS), y.shape[1]))
-    for li, ((hit, partner), (count, segments), shift) in enumerate(zip(
+    sums.put('lag_n', np.stack([count for count, _ in lay['lag_segments']], axis=1)
+             .astype(np.float64))
+    for li, ((hit, partner), (_, segments), shift) in enumerate(zip(
             lay['lags'], lay['lag_segments'], lay['lag_shifts'])):
-        counts[:, li] = count
         if shift is None:
-            sums[:, li] = _block_sum(segments, y[hit] * y[partner], blocks)
+            pairs = np.flatnonzero(hit)
+
+            def product(at, pairs=pairs, partner=partner, hit=hit):
+                if at is None:
+                    return y[hit] * y[partner]
+                return np.take(y, pairs[at], axis=0) * np.take(y, partner[at], axis=0)
+            cut = segments
+            if sums.direct:
+                cut = _lag_cut(lay, li, segments, pairs.size)
         else:       # the same products, zeros between them: the same sums (x + 0 is x)
-            lag, kept, block_segments = shift
-            product = np.zeros_like(y)
-            np.multiply(y[:-lag], y[lag:], out=product[:-lag], where=kept[:, None])
-            sums[:, li] = _block_sum(block_segments, product, blocks)
-    return counts, sums
+            lag, kept, cut = shift
+            ahead = np.r_[kept, np.zeros(lag, bool)]
+
+            def product(at, lag=lag, kept=kept, ahead=ahead):
+                if at is None:
+                    out = np.zeros_like(y)
+                    np.multiply(y[:-lag], y[lag:], out=out[:-lag], where=kept[:, None])
+                    return out
+                out = np.take(y, at, axis=0) * np.take(y, np.minimum(at + lag, len(y) - 1),
+                                                       axis=0)
+                out[~ahead[at]] = 0.0
+                return out
+            if sums.direct:
+                cut = _cut(lay)
+        sums.add('lag_s', cut, product, li)
+
+
+def _lag_cut(lay: dict, li: int, segments: tuple, n: int) -> blocksums.Segments:
+    """``_cut`` of the samples with a partner at lag number ``li`` (once per protocol)."""
+    cuts = lay.setdefault('lag_cuts', {})
+    if li not in cuts:
+        _cut(lay)
+        cuts[li] = blocksums.Segments(segments[0], segments[1], n, lay['rows'])
+    return cuts[li]
 
 
 SEQUENTIAL = 8    # numpy adds a block of at most this many rows one by one, in order

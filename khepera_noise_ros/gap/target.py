@@ -91,7 +91,8 @@ class Target:
         copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
-            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.values),
+            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.values,
+                                           replicates == 0),
                                    replicates, self.seed + 101 + i)
             stats.append(s)
             factors.append(self._level_inflation(i, sim, s, copies))
@@ -310,7 +311,10 @@ def _block_length(rec: Recording) -> int:
 
 
 def _blocks(rec: Recording, length: int, config: SimConfig,
-            values: bool = False) -> statistics.Blocks:
+            values: bool = False, column_major: bool = False) -> statistics.Blocks:
+    """The block sums of ``rec``; ``values``: the closed-loop value statistics too;
+    ``column_major``: only the full data's sums are wanted (no replicates), which are
+    added faster down contiguous columns."""
     if replay.kind(rec) == 'closed_loop':
         return statistics.closed_loop_blocks(rec, config.task.perturb_every, values)
-    return statistics.stationary_blocks(rec, rec.channels_used, length)
+    return statistics.stationary_blocks(rec, rec.channels_used, length, column_major)
