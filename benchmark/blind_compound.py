@@ -1,7 +1,7 @@
 """Blind benchmark of the compound diagnosis: 2-4 effects at once (prints figures; not a test).
 
     python benchmark/blind_compound.py [--cases 24] [--seed 0] [--jobs 1] [--cache DIR]
-                                       [--hard] [--only K ...] [--out FILE.json]
+                                       [--hard [--loop-only]] [--only K ...] [--out FILE.json]
 
 Each case sets 2-4 effects of the emulated robot (``reality`` effects) at once, each
 at a random location and strength drawn as ``blind_gap.py`` draws a single one; every
@@ -14,7 +14,8 @@ every case with a miss or a false effect the compound's ``rejected`` entry and t
 held-out discrepancy of each part (stationary, closed-loop, closed-loop noise)
 before any effect and after the chosen ones.  ``--cache`` keeps the recordings, so a
 change to the diagnosis is measured on the same data.  ``--hard`` draws the cases of
-``hard_compound.py`` instead: a strong loop effect beside weaker sensor effects.
+``hard_compound.py`` instead: a strong loop effect beside weaker sensor effects;
+``--loop-only`` records those cases closed-loop only (``hard_compound.loop_only``).
 """
 from __future__ import annotations
 
@@ -60,16 +61,19 @@ def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
     return names, dataclasses.replace(base, **effects), truth
 
 
-def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False):
+def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
+                loop_only: bool = False):
     if hard:
         seed = int(rng.integers(0, 2 ** 31))
         names, config, added, truth = hard_compound.draw(rng, seed)
         how = hard_compound.plan(rng)
+        if loop_only:                     # the same draws, recorded closed-loop only
+            how = hard_compound.loop_only(k, seed)
         truth['recorded'] = how
     else:
         names, config, truth = draw_compound(rng, k)
         seed = int(rng.integers(0, 2 ** 31))
-    tag = 'hard' if hard else 'case'
+    tag = ('loop' if loop_only else 'hard') if hard else 'case'
     path = None if cache is None else cache / f'{tag}{k:03d}_{seed}.pkl'
     if path is not None and path.exists():
         return names, truth, pickle.loads(path.read_bytes())
@@ -77,7 +81,9 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False):
     if not hard:
         how = {'stationary': True, 'headings': False}
     recordings = ([blind_gap.record_stationary(world)] if how['stationary'] else []) + \
-        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'])]
+        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'],
+                                      episodes=how.get('episodes',
+                                                       blind_gap.CLOSED_LOOP_EPISODES))]
     if path is not None:
         path.write_bytes(pickle.dumps(recordings))
     return names, truth, recordings
@@ -156,8 +162,13 @@ def main(argv=None) -> int:
     p.add_argument('--hard', action='store_true',
                    help='a strong loop effect beside 1-3 weaker sensor effects of various '
                         'shapes (benchmark/hard_compound.py)')
+    p.add_argument('--loop-only', action='store_true',
+                   help='with --hard: every case recorded closed-loop only (20-30 episodes, '
+                        'headings kept in one case of four)')
     p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
     args = p.parse_args(argv)
+    if args.loop_only and not args.hard:
+        p.error('--loop-only needs --hard')
     if args.jobs < 1:
         p.error(f'--jobs must be >= 1, got {args.jobs}')
     if args.cache is not None:
@@ -168,7 +179,8 @@ def main(argv=None) -> int:
         blind_gap.SENSOR_NOISE)), remainder=False)
     jobs = []
     for k in range(args.cases):
-        names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard)
+        names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard,
+                                              args.loop_only)
         if args.only is None or k in args.only:
             jobs.append((k, names, truth, recordings, options))
     rows = []
