@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from . import loopchange
 from .blocks import Key
 
 BANDS = (0.0, 175.0, 350.0)       # lower edges of the level bands (readings; 525 is dark)
@@ -25,7 +26,7 @@ BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to b
 REGRESSORS = 5                    # per cell: level, heading, its square, last two turns
 VIEWS = ('still', 'residual')
 FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
-                     for s in ('spread', 'correlation', 'autocorrelation'))
+                     for s in ('spread', 'correlation', 'autocorrelation')) | loopchange.FAMILIES
 
 
 def episode_parts(rec, perturb_every: int) -> dict:
@@ -45,6 +46,8 @@ def episode_parts(rec, perturb_every: int) -> dict:
     # names distinct from ``gap.closedloop``'s own sums: ``still_`` and ``res_``
     parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
                   scale=0.5)                   # var(d) = 2 var(noise) for white noise
+    parts.update(loopchange.episode_parts(rec, perturb_every, order, ep, steps, r, power,
+                                          episodes.size, _by))
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
         parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
@@ -172,7 +175,8 @@ def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
             for k in range(8):
                 keys.append(Key(f'loop_{view}_autocorrelation', (k,), condition, part))
                 cols.append(lag[:, k])
-    return keys, cols
+    more_keys, more_cols = loopchange.stats(b, sums, s, condition)
+    return keys + more_keys, cols + more_cols
 
 
 def _still(b, sums, s):
@@ -218,6 +222,10 @@ def _residual(b, sums, s):
     return dof, cov, bands, lag
 
 
+CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation', 'loop_change_correlation')
+SPREADS = ('loop_still_spread', 'loop_residual_spread', 'loop_change_spread')
+
+
 def evidence(c, channels) -> np.ndarray:
     """Combined z (Stouffer over conditions and views) that a pair's closed-loop noise is
     more correlated than simulated: the fast part where the still view has it."""
@@ -225,7 +233,7 @@ def evidence(c, channels) -> np.ndarray:
     n = len(channels)
     zsum, count = np.zeros((n, n)), np.zeros((n, n))
     for k, z in zip(c.keys, c.z):
-        if k.family in ('loop_still_correlation', 'loop_residual_correlation') \
+        if k.family in CORRELATIONS \
                 and np.isfinite(z) and all(s in channels for s in k.sensors):
             a, b = (channels.index(s) for s in k.sensors)
             for i, j in ((a, b), (b, a)):
@@ -238,7 +246,7 @@ def evidence(c, channels) -> np.ndarray:
 def spread_rows(c) -> list:
     """(key, real, sim, se, z) of the closed-loop spreads (both views)."""
     return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
-            if k.family in ('loop_still_spread', 'loop_residual_spread')]
+            if k.family in SPREADS]
 
 
 def spread_cells(c, sensors, real) -> list:
@@ -253,7 +261,7 @@ def spread_cells(c, sensors, real) -> list:
         if k.sensors[0] not in sensors or not (np.isfinite(r) and np.isfinite(s)):
             continue
         excess = r * r - s * s
-        if k.family == 'loop_still_spread':
+        if k.family != 'loop_residual_spread':     # by level band
             lo, hi = (float(v) for v in k.part.split()[1].split('-'))
             out.append(((lo + hi) / 2, excess))
         elif (k.sensors, k.condition) in level:
