@@ -180,7 +180,7 @@ def main(argv=None) -> int:
     jobs = []
     for k in range(args.cases):
         names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard,
-                                              args.loop_only)
+                                               args.loop_only)
         if args.only is None or k in args.only:
             jobs.append((k, names, truth, recordings, options))
     rows = []

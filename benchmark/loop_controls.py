@@ -9,7 +9,6 @@ other than the one loop effect is a false sensor effect.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
