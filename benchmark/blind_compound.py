@@ -112,6 +112,8 @@ def diagnose_case(job) -> dict:
             'steps': [(c['name'], round(c['added_reduction'], 4), round(c['p_value'], 3),
                        c.get('counted_by'))
                       for c in comp['chosen']] if comp else [],
+            'fitted': [(c['name'], c['sensors'], c['parameters']) for c in comp['chosen']]
+            if comp else [],
             'parts_before': _parts(result.held_out_before), 'parts_after': _parts(after),
             'single': [(e['name'], round(e['heldout_reduction'], 3)) for e in out['effects']],
             'seconds': seconds}
