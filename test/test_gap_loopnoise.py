@@ -51,19 +51,17 @@ def test_a_shared_pair_shows_beside_the_latency_and_a_clean_loop_does_not():
     assert zs.size > 30 and np.nanmax(np.abs(zs)) < 4.5, zs
 
 
-def test_latency_and_shared_pair_are_both_chosen():
-    rec = loop_only([LATENCY, SHARED], seed=14)
-    out = diagnose.diagnose([rec], diagnose.Options(config=CONFIG, replicates=60,
-                                                    remainder=False)).to_json()
-    chosen = out['compound']['chosen']
+def _chosen(effects, seed):
+    out = diagnose.diagnose([loop_only(effects, seed)], diagnose.Options(
+        config=CONFIG, replicates=60, remainder=False)).to_json()
+    return out['compound']['chosen']
+
+
+def test_latency_and_shared_pair_are_both_chosen_and_a_clean_latency_alone():
+    chosen = _chosen([LATENCY, SHARED], seed=14)
     names = [s['name'] for s in chosen]
     assert names[0] == 'sensor_latency' and 'correlated_noise' in names, chosen
     groups = chosen[names.index('correlated_noise')]['parameters']['groups']
     assert [sorted(g) for g in groups] == [list(PAIR)], groups
-
-
-def test_a_clean_latency_gains_no_sensor_effect():
-    rec = loop_only([LATENCY], seed=15)
-    out = diagnose.diagnose([rec], diagnose.Options(config=CONFIG, replicates=60,
-                                                    remainder=False)).to_json()
-    assert [s['name'] for s in out['compound']['chosen']] == ['sensor_latency'], out['compound']
+    clean = _chosen([LATENCY], seed=15)         # control: no false sensor effect
+    assert [s['name'] for s in clean] == ['sensor_latency'], clean

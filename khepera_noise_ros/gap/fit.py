@@ -52,8 +52,6 @@ def _channels(target: Target) -> list[int]:
 def gain_offset(target: Target, c: Comparison) -> Candidate:
     name = fx.SensorGainOffset.name
     rows = _rows(c, 'level')
-    if not rows and target.base != 'observed' and not target.of_kind('stationary'):
-        return loopfit.gain_offset(target, c) or Candidate(name, None, 'no levels to compare')
     if not rows or target.base == 'observed':
         return Candidate(name, None, 'no levels from the light model to compare')
     change = timesig.of_target(target)
