@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import closednoise, fitturn, limits, loopfit, ownwander, pileup, spreadlaw, timesig
+from . import closednoise, fitturn, limits, ownwander, pileup, spreadlaw, timesig
 from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
 from .fitbase import golden as _golden, rows as _rows
 from .groups import cluster, excess_evidence, part_evidence
@@ -407,9 +407,6 @@ def latency(target: Target, c: Comparison) -> Candidate:
     sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
         target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),
                          families)))
-    if not target.of_kind('stationary'):
-        sensors, delay = loopfit.latency_set(target, sensors, delay,
-                                             _present(target, ('closed_loop',)), families)
     return Candidate(name, fx.SensorLatency(sensors, delay),
                      f'turn responses of {_names(sensors)} delayed {delay} step(s)')
 
