@@ -6,7 +6,7 @@ the recording and the plain simulator's configuration.
 """
 import numpy as np
 
-from khepera_noise_ros.gap import closednoise, diagnose, replay
+from khepera_noise_ros.gap import closednoise, diagnose, loopchange, replay
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.target import Target
 from test_gap_support import CONFIG, closed_loop_protocol
@@ -95,7 +95,8 @@ def test_heading_residuals_need_recorded_headings():
     assert {'loop_residual_spread', 'loop_residual_correlation'} <= families
     rec.heading_deg[:] = np.nan          # a robot nobody tracked; it never stands still
     families = {k.family for k in Target([rec], CONFIG, 1, replicates=20).real.keys}
-    assert not families & closednoise.FAMILIES
+    assert not families & (closednoise.FAMILIES - loopchange.FAMILIES)
+    assert loopchange.FAMILIES <= families       # only the change residuals are left
     assert 'closed_loop_level' in families
 
 
