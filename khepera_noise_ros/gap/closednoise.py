@@ -257,7 +257,10 @@ def spread_cells(c, sensors, real) -> list:
     level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
              if k.family == 'closed_loop_level'}
     out = []
-    for k, r, s, se, z in spread_rows(c):
+    rows = spread_rows(c)
+    # the change residuals' regression takes part of the noise too: a fallback only
+    direct = [row for row in rows if row[0].family != 'loop_change_spread']
+    for k, r, s, se, z in direct or rows:
         if k.sensors[0] not in sensors or not (np.isfinite(r) and np.isfinite(s)):
             continue
         excess = r * r - s * s
