@@ -93,6 +93,7 @@ def test_heading_residuals_need_recorded_headings():
     rec = tracked([], episodes=8)
     families = {k.family for k in Target([rec], CONFIG, 1, replicates=20).real.keys}
     assert {'loop_residual_spread', 'loop_residual_correlation'} <= families
+    assert not families & loopchange.FAMILIES     # tracked: the heading residuals alone
     rec.heading_deg[:] = np.nan          # a robot nobody tracked; it never stands still
     families = {k.family for k in Target([rec], CONFIG, 1, replicates=20).real.keys}
     assert not families & (closednoise.FAMILIES - loopchange.FAMILIES)

@@ -46,10 +46,14 @@ def episode_parts(rec, perturb_every: int) -> dict:
     # names distinct from ``gap.closedloop``'s own sums: ``still_`` and ``res_``
     parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
                   scale=0.5)                   # var(d) = 2 var(noise) for white noise
-    parts.update(loopchange.episode_parts(rec, perturb_every, order, ep, steps, r, power,
-                                          episodes.size, _by))
     heading = rec.heading_deg[order]
-    if np.isfinite(heading).all():
+    tracked = bool(np.isfinite(heading).all())
+    # the change residuals stand in for the heading residuals on a robot nobody tracked;
+    # a simulated side always knows its headings: it gives both, the real side chooses
+    if not tracked or rec.manifest.get('source') == 'simulator':
+        parts.update(loopchange.episode_parts(rec, perturb_every, order, ep, steps, r, power,
+                                              episodes.size, _by))
+    if tracked:
         parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
                                      episodes.size))
     return parts
@@ -232,8 +236,11 @@ def evidence(c, channels) -> np.ndarray:
     channels = list(channels)
     n = len(channels)
     zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    # the change residuals only where no direct view of the noise exists (as spread_cells)
+    direct = {k.family for k in c.keys} & set(CORRELATIONS[:2])
+    families = direct or set(CORRELATIONS)
     for k, z in zip(c.keys, c.z):
-        if k.family in CORRELATIONS \
+        if k.family in families \
                 and np.isfinite(z) and all(s in channels for s in k.sensors):
             a, b = (channels.index(s) for s in k.sensors)
             for i, j in ((a, b), (b, a)):
