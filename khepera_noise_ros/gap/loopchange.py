@@ -4,15 +4,15 @@ A robot that logs only while it runs its task may never stand still (the project
 controller never commands power 0) and seldom knows its heading, so neither view of
 ``gap.closednoise`` exists.  What is left is each reading's next change: within an
 episode it is the light's response to the last few turns plus the difference of two
-noise draws.  Each sensor's change is regressed on the last four commands and on its
-own reading (alone and times the last two commands): the light's part is taken out,
-what is left is mostly noise (fitted on the whole recording, per condition).  Per-episode
-sums of that *change residual* give ``loop_change_spread`` per sensor and level band
-(the variance halved, as for a difference of two white draws),
-``loop_change_correlation`` per pair (noise shared by sensors) and
-``loop_change_autocorrelation`` at lag 1 (-0.5 for white noise; a slower noise is less
-negative).  Only a sensor's own reading is a regressor: another sensor's reading would
-carry the noise it shares and take it out of the residual.  See docs/diagnosis.md.
+noise draws.  Each sensor's change is regressed on the last four commands and on their
+products with every reading (which side the lamp is on, how steep its light is): the
+light's part is taken out, what is left is mostly noise (fitted on the whole recording,
+per condition).  Per-episode sums of that *change residual* give ``loop_change_spread``
+per sensor and level band (the variance halved, as for a difference of two draws) and,
+on rows where the sensors read dark, ``loop_change_correlation`` per pair (noise shared
+by sensors) and ``loop_change_autocorrelation`` at lag 1.  No reading is a regressor on
+its own: it would carry the noise it shares and take it out of the residual.  See
+docs/diagnosis.md.
 """
 from __future__ import annotations
 
