@@ -50,10 +50,12 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     creep_seen = any(k.part == still for f in SCATTER
                      for k in flagged[f])
 
-    # not the change residuals: what a latency or a sensor effect leaves there pulls the
+    # beside a latency, not the change residuals: what the latency leaves there pulls the
     # scale the wrong way (``gap.loopchange``)
     present = {k.family for k in target.real.keys}
-    families = present - loopchange.FAMILIES if present & loopchange.FAMILIES else None
+    lagged = any(e.name == fx.SensorLatency.name for e in getattr(target, 'given', ()))
+    families = present - loopchange.FAMILIES if lagged and present & loopchange.FAMILIES \
+        else None
 
     def objective(scale, slip, creep=0.0):
         return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS,
