@@ -1,8 +1,7 @@
 """Blind benchmark of the compound diagnosis: 2-4 effects at once (prints figures; not a test).
 
     python benchmark/blind_compound.py [--cases 24] [--seed 0] [--jobs 1] [--cache DIR]
-                                       [--hard [--closed-only]] [--only K ...]
-                                       [--out FILE.json]
+                                       [--hard [--loop-only]] [--only K ...] [--out FILE.json]
 
 Each case sets 2-4 effects of the emulated robot (``reality`` effects) at once, each
 at a random location and strength drawn as ``blind_gap.py`` draws a single one; every
@@ -16,8 +15,7 @@ held-out discrepancy of each part (stationary, closed-loop, closed-loop noise)
 before any effect and after the chosen ones.  ``--cache`` keeps the recordings, so a
 change to the diagnosis is measured on the same data.  ``--hard`` draws the cases of
 ``hard_compound.py`` instead: a strong loop effect beside weaker sensor effects;
-with ``--closed-only`` every such case is recorded closed-loop only (a robot that logs
-only while it runs its task), headings kept in one case in four.
+``--loop-only`` records those cases closed-loop only (``hard_compound.loop_only``).
 """
 from __future__ import annotations
 
@@ -44,7 +42,7 @@ from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 
 LOOP = ('actuator_turn_error', 'sensor_latency')
-PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'loop_values')
+PARTS = ('stationary', 'closed_loop', 'closed_loop_noise')
 
 
 def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
@@ -64,18 +62,18 @@ def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
 
 
 def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
-                closed_only: bool = False):
+                loop_only: bool = False):
     if hard:
         seed = int(rng.integers(0, 2 ** 31))
         names, config, added, truth = hard_compound.draw(rng, seed)
-        how = hard_compound.plan(rng)       # drawn in either mode: the same cases
-        if closed_only:
-            how = {'stationary': False, 'headings': k % 4 == 0}
+        how = hard_compound.plan(rng)
+        if loop_only:                     # the same draws, recorded closed-loop only
+            how = hard_compound.loop_only(k, seed)
         truth['recorded'] = how
     else:
         names, config, truth = draw_compound(rng, k)
         seed = int(rng.integers(0, 2 ** 31))
-    tag = ('hardcl' if closed_only else 'hard') if hard else 'case'
+    tag = ('loop' if loop_only else 'hard') if hard else 'case'
     path = None if cache is None else cache / f'{tag}{k:03d}_{seed}.pkl'
     if path is not None and path.exists():
         return names, truth, pickle.loads(path.read_bytes())
@@ -83,7 +81,9 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
     if not hard:
         how = {'stationary': True, 'headings': False}
     recordings = ([blind_gap.record_stationary(world)] if how['stationary'] else []) + \
-        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'])]
+        [blind_gap.record_closed_loop(world, genome, seed=seed, headings=how['headings'],
+                                      episodes=how.get('episodes',
+                                                       blind_gap.CLOSED_LOOP_EPISODES))]
     if path is not None:
         path.write_bytes(pickle.dumps(recordings))
     return names, truth, recordings
@@ -112,6 +112,8 @@ def diagnose_case(job) -> dict:
             'steps': [(c['name'], round(c['added_reduction'], 4), round(c['p_value'], 3),
                        c.get('counted_by'))
                       for c in comp['chosen']] if comp else [],
+            'fitted': [(c['name'], c['sensors'], c['parameters']) for c in comp['chosen']]
+            if comp else [],
             'parts_before': _parts(result.held_out_before), 'parts_after': _parts(after),
             'single': [(e['name'], round(e['heldout_reduction'], 3)) for e in out['effects']],
             'seconds': seconds}
@@ -162,14 +164,15 @@ def main(argv=None) -> int:
     p.add_argument('--hard', action='store_true',
                    help='a strong loop effect beside 1-3 weaker sensor effects of various '
                         'shapes (benchmark/hard_compound.py)')
-    p.add_argument('--closed-only', action='store_true',
-                   help='with --hard: every case recorded closed-loop only, no stationary part')
+    p.add_argument('--loop-only', action='store_true',
+                   help='with --hard: every case recorded closed-loop only (20-30 episodes, '
+                        'headings kept in one case of four)')
     p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
     args = p.parse_args(argv)
+    if args.loop_only and not args.hard:
+        p.error('--loop-only needs --hard')
     if args.jobs < 1:
         p.error(f'--jobs must be >= 1, got {args.jobs}')
-    if args.closed_only and not args.hard:
-        p.error('--closed-only needs --hard (the closed-loop-only cases are hard ones)')
     if args.cache is not None:
         args.cache.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
@@ -179,7 +182,7 @@ def main(argv=None) -> int:
     jobs = []
     for k in range(args.cases):
         names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard,
-                                               args.closed_only)
+                                               args.loop_only)
         if args.only is None or k in args.only:
             jobs.append((k, names, truth, recordings, options))
     rows = []

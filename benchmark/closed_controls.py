@@ -5,7 +5,7 @@ a test).
 
 For each seed and each loop setting (none; a sensor latency of 1-3 samples; a turn error),
 the emulated robot with no sensor effect records closed-loop only (30 episodes, as
-``blind_compound.py --hard --closed-only``), and the diagnosis's answer is printed.  A
+``blind_compound.py --hard --loop-only``), and the diagnosis's answer is printed.  A
 sensor effect named (a lattice, a limit, dropouts: ``saturation_quantization``; any
 other) is a false one.  Last: the false effects per name.
 """

@@ -198,3 +198,9 @@ def plan(rng) -> dict:
     """How a case is recorded: closed-loop headings kept (a tracked robot) in half the
     cases, and in a quarter no stationary recording at all."""
     return {'headings': bool(rng.random() < 0.5), 'stationary': bool(rng.random() < 0.75)}
+
+
+def loop_only(k: int, seed: int) -> dict:
+    """How case ``k`` is recorded in ``--loop-only``: a robot that logs only while it runs
+    its task (20-30 episodes, no stationary part), headings kept in one case of four."""
+    return {'headings': k % 4 == 3, 'stationary': False, 'episodes': 20 + seed % 11}

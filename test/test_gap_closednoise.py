@@ -6,7 +6,7 @@ the recording and the plain simulator's configuration.
 """
 import numpy as np
 
-from khepera_noise_ros.gap import closednoise, diagnose, replay
+from khepera_noise_ros.gap import closednoise, diagnose, loopchange, replay
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.target import Target
 from test_gap_support import CONFIG, closed_loop_protocol
@@ -93,9 +93,11 @@ def test_heading_residuals_need_recorded_headings():
     rec = tracked([], episodes=8)
     families = {k.family for k in Target([rec], CONFIG, 1, replicates=20).real.keys}
     assert {'loop_residual_spread', 'loop_residual_correlation'} <= families
+    assert not families & loopchange.FAMILIES     # tracked: the heading residuals alone
     rec.heading_deg[:] = np.nan          # a robot nobody tracked; it never stands still
     families = {k.family for k in Target([rec], CONFIG, 1, replicates=20).real.keys}
-    assert not families & closednoise.FAMILIES
+    assert not families & (closednoise.FAMILIES - loopchange.FAMILIES)
+    assert loopchange.FAMILIES <= families       # only the change residuals are left
     assert 'closed_loop_level' in families
 
 

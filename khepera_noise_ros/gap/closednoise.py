@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from . import loopchange
 from .blocks import Key
 
 BANDS = (0.0, 175.0, 350.0)       # lower edges of the level bands (readings; 525 is dark)
@@ -25,7 +26,7 @@ BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to b
 REGRESSORS = 5                    # per cell: level, heading, its square, last two turns
 VIEWS = ('still', 'residual')
 FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
-                     for s in ('spread', 'correlation', 'autocorrelation'))
+                     for s in ('spread', 'correlation', 'autocorrelation')) | loopchange.FAMILIES
 
 
 def episode_parts(rec, perturb_every: int) -> dict:
@@ -46,7 +47,13 @@ def episode_parts(rec, perturb_every: int) -> dict:
     parts = _view(d, level, still, still & np.r_[False, still[:-1]], ep, episodes.size,
                   scale=0.5)                   # var(d) = 2 var(noise) for white noise
     heading = rec.heading_deg[order]
-    if np.isfinite(heading).all():
+    tracked = bool(np.isfinite(heading).all())
+    # the change residuals stand in for the heading residuals on a robot nobody tracked;
+    # a simulated side always knows its headings: it gives both, the real side chooses
+    if not tracked or rec.manifest.get('source') == 'simulator':
+        parts.update(loopchange.episode_parts(rec, perturb_every, order, ep, steps, r, power,
+                                              episodes.size, _by))
+    if tracked:
         parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
                                      episodes.size))
     return parts
@@ -172,7 +179,8 @@ def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
             for k in range(8):
                 keys.append(Key(f'loop_{view}_autocorrelation', (k,), condition, part))
                 cols.append(lag[:, k])
-    return keys, cols
+    more_keys, more_cols = loopchange.stats(b, sums, s, condition)
+    return keys + more_keys, cols + more_cols
 
 
 def _still(b, sums, s):
@@ -218,14 +226,21 @@ def _residual(b, sums, s):
     return dof, cov, bands, lag
 
 
+CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation', 'loop_change_correlation')
+SPREADS = ('loop_still_spread', 'loop_residual_spread', 'loop_change_spread')
+
+
 def evidence(c, channels) -> np.ndarray:
     """Combined z (Stouffer over conditions and views) that a pair's closed-loop noise is
     more correlated than simulated: the fast part where the still view has it."""
     channels = list(channels)
     n = len(channels)
     zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    # the change residuals only where no direct view of the noise exists (as spread_cells)
+    direct = {k.family for k in c.keys} & set(CORRELATIONS[:2])
+    families = direct or set(CORRELATIONS)
     for k, z in zip(c.keys, c.z):
-        if k.family in ('loop_still_correlation', 'loop_residual_correlation') \
+        if k.family in families \
                 and np.isfinite(z) and all(s in channels for s in k.sensors):
             a, b = (channels.index(s) for s in k.sensors)
             for i, j in ((a, b), (b, a)):
@@ -238,7 +253,7 @@ def evidence(c, channels) -> np.ndarray:
 def spread_rows(c) -> list:
     """(key, real, sim, se, z) of the closed-loop spreads (both views)."""
     return [(k, r, s, se, z) for k, r, s, se, z in zip(c.keys, c.real, c.sim, c.se, c.z)
-            if k.family in ('loop_still_spread', 'loop_residual_spread')]
+            if k.family in SPREADS]
 
 
 def spread_cells(c, sensors, real) -> list:
@@ -249,11 +264,14 @@ def spread_cells(c, sensors, real) -> list:
     level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
              if k.family == 'closed_loop_level'}
     out = []
-    for k, r, s, se, z in spread_rows(c):
+    rows = spread_rows(c)
+    # the change residuals' regression takes part of the noise too: a fallback only
+    direct = [row for row in rows if row[0].family != 'loop_change_spread']
+    for k, r, s, se, z in direct or rows:
         if k.sensors[0] not in sensors or not (np.isfinite(r) and np.isfinite(s)):
             continue
         excess = r * r - s * s
-        if k.family == 'loop_still_spread':
+        if k.family != 'loop_residual_spread':     # by level band
             lo, hi = (float(v) for v in k.part.split()[1].split('-'))
             out.append(((lo + hi) / 2, excess))
         elif (k.sensors, k.condition) in level:

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import effects as fx
 from .fitbase import Z_DETECT, Candidate, golden, rows
+from . import loopchange
 from .target import Target
 from .turnscatter import BANDS, band_label
 from .where import Comparison
@@ -49,8 +50,16 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     creep_seen = any(k.part == still for f in SCATTER
                      for k in flagged[f])
 
+    # beside a latency, not the change residuals: what the latency leaves there pulls the
+    # scale the wrong way (``gap.loopchange``)
+    present = {k.family for k in target.real.keys}
+    lagged = any(e.name == fx.SensorLatency.name for e in getattr(target, 'given', ()))
+    families = present - loopchange.FAMILIES if lagged and present & loopchange.FAMILIES \
+        else None
+
     def objective(scale, slip, creep=0.0):
-        return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS)
+        return target.objective([fx.ActuatorTurnError(scale, slip, creep=creep)], KINDS,
+                                families)
     # the creep first where power 0 shows it (there the slip cannot act), then the
     # slip given it, the scale once more, and the creep given both
     scale = golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
