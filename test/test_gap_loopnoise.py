@@ -28,7 +28,9 @@ def _rows(c, family):
 def test_change_residuals_exist_without_headings_or_still_steps():
     rec = loop_only([LATENCY], seed=11)
     assert not np.isfinite(rec.heading_deg).any()
-    blocks = closedloop.closed_loop_blocks(rec, 5)
+    beside = closedloop.closed_loop_blocks(rec, 5)     # a stationary recording beside it
+    assert 'chg_band_n' not in beside.layout               # ... keeps the old statistics
+    blocks = closedloop.closed_loop_blocks(rec, 5, values=True)
     assert blocks.part(blocks.sums, 'still_n').sum() == 0       # never a still pair
     stats = closedloop.closed_loop_stats(blocks, blocks.sums[None].sum(axis=1)[:, None])
     families = {k.family for k in stats.keys}

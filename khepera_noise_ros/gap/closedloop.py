@@ -14,7 +14,8 @@ from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False) -> Blocks:
     """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front); with
-    ``values``, those of the value statistics too (``gap.loopvalues``)."""
+    ``values`` (a diagnosis with no stationary recording), those of the value statistics
+    (``gap.loopvalues``) and of the change residuals (``gap.loopchange``) too."""
     rec, dropped = dropout.repair_episodes(rec)      # a dropout counts once: on its own
     conditions = rec.conditions()
     heading_known = bool(np.isfinite(rec.heading_deg).all())
@@ -49,7 +50,7 @@ def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False)
             if heading_known else turnscatter.empty_heading())
         stratum.append(conditions.index(str(rec.condition[idx[0]])))
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
-    parts.update(closednoise.episode_parts(rec, perturb_every))     # noise structure
+    parts.update(closednoise.episode_parts(rec, perturb_every, values))   # noise structure
     parts.update(dropped)
     integer = False
     if values:

@@ -29,7 +29,7 @@ FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
                      for s in ('spread', 'correlation', 'autocorrelation')) | loopchange.FAMILIES
 
 
-def episode_parts(rec, perturb_every: int) -> dict:
+def episode_parts(rec, perturb_every: int, change: bool = False) -> dict:
     """{name: (episodes, ...) sums} of both views, episodes in ``np.unique`` order."""
     episodes, ep = np.unique(rec.episode, return_inverse=True)
     order = np.lexsort((rec.step, ep))
@@ -49,8 +49,10 @@ def episode_parts(rec, perturb_every: int) -> dict:
     heading = rec.heading_deg[order]
     tracked = bool(np.isfinite(heading).all())
     # the change residuals stand in for the heading residuals on a robot nobody tracked;
-    # a simulated side always knows its headings: it gives both, the real side chooses
-    if not tracked or rec.manifest.get('source') == 'simulator':
+    # a simulated side always knows its headings: it gives both, the real side chooses.
+    # Only with ``change`` (no stationary recording): beside one, the emulated robot's
+    # turn error was lost to them (test_gap_compound)
+    if change and (not tracked or rec.manifest.get('source') == 'simulator'):
         parts.update(loopchange.episode_parts(rec, perturb_every, order, ep, steps, r, power,
                                               episodes.size, _by))
     if tracked:
