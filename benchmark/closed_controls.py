@@ -1,13 +1,15 @@
 """Controls of the closed-loop-only diagnosis: no sensor effect at all (prints figures; not
 a test).
 
-    python benchmark/closed_controls.py [--seeds 10] [--loops none latency turn] [--jobs 1]
+    python benchmark/closed_controls.py [--seeds 10] [--first 0] [--loops none latency turn]
+                                        [--episodes 30] [--headings] [--jobs 1]
 
 For each seed and each loop setting (none; a sensor latency of 1-3 samples; a turn error),
-the emulated robot with no sensor effect records closed-loop only (30 episodes, as
-``blind_compound.py --hard --loop-only``), and the diagnosis's answer is printed.  A
-sensor effect named (a lattice, a limit, dropouts: ``saturation_quantization``; any
-other) is a false one.  Last: the false effects per name.
+the emulated robot with no sensor effect records closed-loop only (``--episodes``, no
+headings unless ``--headings``, as most cases of ``blind_compound.py --hard
+--loop-only``), and the diagnosis's answer is printed.  A sensor effect named (a lattice,
+a limit, dropouts: ``saturation_quantization``; a spread law, shared noise; any other) is
+a false one.  Last: the false effects per name.
 """
 from __future__ import annotations
 
@@ -45,10 +47,11 @@ def config(loop: str, rng) -> emu.EffectsConfig:
 
 
 def run(job) -> tuple:
-    seed, loop, genome = job
+    seed, loop, genome, episodes, headings = job
     rng = np.random.default_rng(seed)
     world = blind_gap.robot(config(loop, rng), seed)
-    rec = blind_gap.record_closed_loop(world, genome, seed=seed)
+    rec = blind_gap.record_closed_loop(world, genome, seed=seed, episodes=episodes,
+                                       headings=headings)
     options = diagnose.Options(config=SimConfig(noise=NoiseModel.independent_only(
         blind_gap.SENSOR_NOISE)), remainder=False, seed=seed)
     out = diagnose.diagnose([rec], options).to_json()
@@ -61,13 +64,18 @@ def run(job) -> tuple:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('--seeds', type=int, default=10)
+    p.add_argument('--first', type=int, default=0, help='the first seed')
     p.add_argument('--loops', nargs='*', default=list(LOOPS), choices=list(LOOPS))
+    p.add_argument('--episodes', type=int, default=30)
+    p.add_argument('--headings', action='store_true', help='keep the headings (a tracked robot)')
     p.add_argument('--jobs', type=int, default=1)
     args = p.parse_args(argv)
-    if args.seeds < 1 or args.jobs < 1:
-        p.error(f'--seeds and --jobs must be >= 1, got {args.seeds} and {args.jobs}')
+    if min(args.seeds, args.jobs, args.episodes) < 1:
+        p.error(f'--seeds, --episodes and --jobs must be >= 1, got {args.seeds}, '
+                f'{args.episodes} and {args.jobs}')
     genome = blind_gap.evolved_genome(0)        # the controller of blind_compound.py's seed 0
-    jobs = [(seed, loop, genome) for loop in args.loops for seed in range(args.seeds)]
+    jobs = [(seed, loop, genome, args.episodes, args.headings) for loop in args.loops
+            for seed in range(args.first, args.first + args.seeds)]
     false: dict = {}
     with ProcessPoolExecutor(args.jobs) as pool:
         for seed, loop, answer in pool.map(run, jobs):
