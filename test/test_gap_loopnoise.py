@@ -30,7 +30,7 @@ def test_change_residuals_exist_without_headings_or_still_steps():
     assert not np.isfinite(rec.heading_deg).any()
     beside = closedloop.closed_loop_blocks(rec, 5)     # a stationary recording beside it
     assert 'chg_band_n' not in beside.layout               # ... keeps the old statistics
-    blocks = closedloop.closed_loop_blocks(rec, 5, values=True)
+    blocks = closedloop.closed_loop_blocks(rec, 5, loop_only=True)
     assert blocks.part(blocks.sums, 'still_n').sum() == 0       # never a still pair
     stats = closedloop.closed_loop_stats(blocks, blocks.sums[None].sum(axis=1)[:, None])
     families = {k.family for k in stats.keys}

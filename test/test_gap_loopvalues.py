@@ -26,7 +26,7 @@ def test_a_lattice_shows_in_closed_loop_readings():
     one residue modulo 2 and 4; a clean recording's values spread over the residues."""
     for effects, expect in (([LATTICE], 1.0), ([], None)):
         rec = _closed(effects, seed=11)
-        stats = statistics.compute(statistics.closed_loop_blocks(rec, 5, values=True), 50)
+        stats = statistics.compute(statistics.closed_loop_blocks(rec, 5, loop_only=True), 50)
         for q in (2, 4):
             share = _shares(stats, q)
             assert len(share) == 8, share

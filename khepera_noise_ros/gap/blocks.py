@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 FACTORS = ('balance', 'intensity', 'turning')
+MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity families
 
 
 class Key(NamedTuple):

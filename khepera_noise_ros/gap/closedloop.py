@@ -12,9 +12,9 @@ from . import closednoise, dropout, loopvalues, turnscatter
 from .blocks import FACTORS, Blocks, Key, Stats, pack
 
 
-def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False) -> Blocks:
+def closed_loop_blocks(rec: Recording, perturb_every: int, loop_only: bool = False) -> Blocks:
     """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front); with
-    ``values`` (a diagnosis with no stationary recording), those of the value statistics
+    ``loop_only`` (a diagnosis with no stationary recording), those of the value statistics
     (``gap.loopvalues``) and of the change residuals (``gap.loopchange``) too."""
     rec, dropped = dropout.repair_episodes(rec)      # a dropout counts once: on its own
     conditions = rec.conditions()
@@ -50,16 +50,16 @@ def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False)
             if heading_known else turnscatter.empty_heading())
         stratum.append(conditions.index(str(rec.condition[idx[0]])))
     parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
-    parts.update(closednoise.episode_parts(rec, perturb_every, values))   # noise structure
+    parts.update(closednoise.episode_parts(rec, perturb_every, loop_only))   # noise structure
     parts.update(dropped)
     integer = False
-    if values:
+    if loop_only:
         more, integer = loopvalues.episode_parts(rec, np.unique(rec.episode))
         parts.update(more)
     sums, layout = pack(parts, len(stratum))
     return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
                   sums, layout, {'perturb_every': perturb_every, 'heading': heading_known,
-                                 'values': values, 'integer': integer})
+                                 'loop_only': loop_only, 'integer': integer})
 
 
 def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:

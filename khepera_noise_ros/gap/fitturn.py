@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import effects as fx
-from .fitbase import Z_DETECT, Candidate, golden, rows
 from . import loopchange
+from .fitbase import Z_DETECT, Candidate, golden, rows
 from .target import Target
 from .turnscatter import BANDS, band_label
 from .where import Comparison
@@ -53,7 +53,7 @@ def actuator(target: Target, c: Comparison) -> Candidate:
     # beside a latency, not the change residuals: what the latency leaves there pulls the
     # scale the wrong way (``gap.loopchange``)
     present = {k.family for k in target.real.keys}
-    lagged = any(e.name == fx.SensorLatency.name for e in getattr(target, 'given', ()))
+    lagged = any(e.name == fx.SensorLatency.name for e in target.given)
     families = present - loopchange.FAMILIES if lagged and present & loopchange.FAMILIES \
         else None
 

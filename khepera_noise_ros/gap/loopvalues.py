@@ -6,16 +6,15 @@ robot.  Per episode (the closed loop's blocks) the sums are weighted counts of t
 values inside a sensor's range and of those on its most common residue modulo each
 step of ``MODULI`` (each value seen counts once); the statistics are ratios of the
 resampled sums.  ``closedloop`` adds them only when a diagnosis has no stationary
-recording (``values``): beside one they would repeat its granularity.  (A pile-up
+recording (``loop_only``): beside one they would repeat its granularity.  (A pile-up
 statistic was tried and left out: docs/diagnosis.md.)
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .blocks import Key
+from .blocks import MODULI, Key
 
-MODULI = (2, 3, 4, 5, 8, 10)     # as the stationary granularity family (``gap.statistics``)
 FAMILIES = frozenset({'loop_granularity'})
 MIN_VALUES = 12     # values inside its range a sensor needs for its lattice statistics
 
@@ -61,8 +60,8 @@ def on_lattice(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def stats(b, sums: np.ndarray, s: int, condition: str) -> tuple[list, list]:
     """(keys, columns) of stratum ``s`` (one condition) from the (R, S, D) sums; none
-    unless the blocks carry them (``values``)."""
-    if not b.extra.get('values'):
+    unless the blocks carry them (``loop_only``)."""
+    if not b.extra.get('loop_only'):
         return [], []
     keys, cols = [], []
     if b.extra.get('integer'):

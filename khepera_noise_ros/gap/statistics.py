@@ -21,12 +21,11 @@ import numpy as np
 
 from ..recording import Recording
 from . import blockcounts, blocklength, blocksums, dropout, pileup
-from .blocks import FACTORS, Blocks, Key, Stats, pack  # noqa: F401 (FACTORS, Key re-exported)
+from .blocks import FACTORS, MODULI, Blocks, Key, Stats, pack  # noqa: F401 (re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 from .resample import resampled, stratum_sums, weights  # noqa: F401 (re-exported)
 
 LAGS = (1, 3)                    # autocorrelation lags, in steps
-MODULI = (2, 3, 4, 5, 8, 10)     # quantisation steps tested by the granularity family
 STEP_LAGS = 3                    # samples after a heading change in the step response
 REPLICATES = 200
 
@@ -355,9 +354,9 @@ def _shifted(lay: dict, hit: np.ndarray, partner: np.ndarray, lag: int):
     return lag, hit[:n - lag].copy(), lay['segments']
 
 
-def closed_loop_blocks(rec: Recording, perturb_every: int, values: bool = False) -> Blocks:
+def closed_loop_blocks(rec: Recording, perturb_every: int, loop_only: bool = False) -> Blocks:
     """Per-episode sums of closed-loop Khepera data (``gap.closedloop``)."""
-    return _closed_loop_blocks(rec, perturb_every, values)
+    return _closed_loop_blocks(rec, perturb_every, loop_only)
 
 
 def compute(blocks: Blocks, replicates: int = REPLICATES, seed: int = 0) -> Stats:

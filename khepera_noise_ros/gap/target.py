@@ -55,8 +55,8 @@ class Target:
             self.block_lengths = [_block_length(r) for r in self.recordings]
         self.kinds = [replay.kind(r) for r in self.recordings]
         # closed loop alone: its value statistics stand in for the stationary ones
-        self.values = 'stationary' not in self.kinds
-        self._real = [statistics.compute(_blocks(rec, n, self.config, self.values),
+        self.loop_only = 'stationary' not in self.kinds
+        self._real = [statistics.compute(_blocks(rec, n, self.config, self.loop_only),
                                          self.replicates,
                                          self.seed + i)
                       for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
@@ -91,7 +91,7 @@ class Target:
         copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
-            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.values,
+            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.loop_only,
                                            replicates == 0),
                                    replicates, self.seed + 101 + i)
             stats.append(s)
@@ -311,10 +311,10 @@ def _block_length(rec: Recording) -> int:
 
 
 def _blocks(rec: Recording, length: int, config: SimConfig,
-            values: bool = False, column_major: bool = False) -> statistics.Blocks:
-    """The block sums of ``rec``; ``values``: the closed-loop value statistics too;
-    ``column_major``: only the full data's sums are wanted (no replicates), which are
-    added faster down contiguous columns."""
+            loop_only: bool = False, column_major: bool = False) -> statistics.Blocks:
+    """The block sums of ``rec``; ``loop_only``: no stationary recording beside it
+    (``closed_loop_blocks``); ``column_major``: only the full data's sums are wanted (no
+    replicates), which are added faster down contiguous columns."""
     if replay.kind(rec) == 'closed_loop':
-        return statistics.closed_loop_blocks(rec, config.task.perturb_every, values)
+        return statistics.closed_loop_blocks(rec, config.task.perturb_every, loop_only)
     return statistics.stationary_blocks(rec, rec.channels_used, length, column_major)
