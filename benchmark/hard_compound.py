@@ -200,7 +200,10 @@ def plan(rng) -> dict:
     return {'headings': bool(rng.random() < 0.5), 'stationary': bool(rng.random() < 0.75)}
 
 
-def loop_only(k: int, seed: int) -> dict:
+def loop_only(k: int, seed: int, tracked: bool = False) -> dict:
     """How case ``k`` is recorded in ``--loop-only``: a robot that logs only while it runs
-    its task (20-30 episodes, no stationary part), headings kept in one case of four."""
+    its task (20-30 episodes, no stationary part), headings kept in one case of four.
+    ``tracked``: every case a tracked robot (headings kept), 20 episodes."""
+    if tracked:
+        return {'headings': True, 'stationary': False, 'episodes': 20}
     return {'headings': k % 4 == 3, 'stationary': False, 'episodes': 20 + seed % 11}

@@ -6,9 +6,9 @@ Two views, both as per-episode sums (episodes are the closed-loop blocks):
 * *still pairs* (always): first differences of consecutive readings where the
   previous command did not turn the robot and no knock came; the light did not
   move, so the difference is noise alone (headings need not be known).
-* *heading residuals* (headings recorded): readings minus a fit in heading and the
-  last two turns within their (condition, heading bin), refitted in every bootstrap
-  replicate from per-episode regression sums.
+* *heading residuals* (headings recorded): readings minus a fit in heading and two
+  turns within their (condition, heading bin), each sensor at the delay whose heading
+  fits it best (``gap.headinglag``).
 
 See docs/diagnosis.md for why and their limits.
 """
@@ -17,13 +17,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-from . import loopchange
+from . import headinglag, loopchange
 from .blocks import Key
 
 BANDS = (0.0, 175.0, 350.0)       # lower edges of the level bands (readings; 525 is dark)
-HEADING_BIN = 10.0                # degrees per heading bin of the residual view
-BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to be used
-REGRESSORS = 5                    # per cell: level, heading, its square, last two turns
 VIEWS = ('still', 'residual')
 FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
                      for s in ('spread', 'correlation', 'autocorrelation')) | loopchange.FAMILIES
@@ -62,70 +59,18 @@ def episode_parts(rec, perturb_every: int, change: bool = False) -> dict:
 
 
 def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:
-    """Per-episode, per-cell regression sums of the heading-residual view (so that every
-    bootstrap replicate refits the cells' lines), and lag-1 products of the full-data
-    residuals."""
-    cell, x, use = _design(heading, condition, pair, episodes)
-    cells = int(cell.max()) + 1
-    at = ep * cells + cell
-    size = episodes * cells
-
-    def by_cell(values):
-        return _by(at[use], values[use].reshape(int(use.sum()), -1), size) \
-            .reshape((episodes, cells) + values.shape[1:])
-    parts = {'res_cn': by_cell(np.ones(len(r))),
-             'res_xx': by_cell(x[:, :, None] * x[:, None, :]),
-             'res_xr': by_cell(x[:, :, None] * r[:, None, :]),
-             'res_rr': by_cell(r[:, :, None] * r[:, None, :])}
-    xx = parts['res_xx'].sum(axis=0)
-    beta = _solve(xx, parts['res_xr'].sum(axis=0))                       # (cells, 5, 8)
-    e = np.where(use[:, None], r - np.einsum('ni,nik->nk', x, beta[cell]), 0.0)
+    """Per-episode sums of the heading-residual view: each sensor's residuals at its own
+    delay (``gap.headinglag``), their cross products and lag-1 products."""
+    e, use, _ = headinglag.residuals(r, heading, condition, pair, episodes)
+    n = len(r)
     lagged = use & pair & np.r_[False, use[:-1]]
     lag = np.zeros_like(e)
     lag[1:] = e[1:] * e[:-1]
-    parts.update({'res_n': _by(ep, use[:, None].astype(np.float64), episodes),
-                  'res_e2': _by(ep, e * e, episodes),
-                  'res_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
-                  'res_lag_s': _by(ep, lag * lagged[:, None], episodes)})
-    return parts
-
-
-def _design(heading, condition, pair, episodes: int):
-    """(cell, regressors, usable) of the heading-residual view.
-
-    A cell is a (condition, heading bin); within it a reading is fitted by a quadratic in
-    heading (the light's gradient and curvature within the bin) plus terms in the last two turns
-    (h(t-1) - h(t), h(t-2) - h(t)): a reading that lags takes the light of an earlier
-    heading, to first order the gradient times the turn, which would otherwise swamp
-    the noise.  Usable: samples with two previous steps, in cells visited at least
-    ``BIN_DENSITY`` times per episode (a rate that does not depend on how many copies
-    are simulated; a fit through a few points leaves the light's curvature)."""
-    _, cond = np.unique(condition, return_inverse=True)
-    h = np.mod(heading + 180.0, 360.0)
-    have = pair & np.r_[False, pair[:-1]]
-    turn1, turn2 = np.zeros_like(h), np.zeros_like(h)
-    turn1[1:] = _wrap(h[:-1] - h[1:])
-    turn2[2:] = _wrap(h[:-2] - h[2:])
-    b = np.floor(h / HEADING_BIN).astype(np.int64)
-    _, cell = np.unique(cond * 1000 + b, return_inverse=True)
-    n = np.bincount(cell, have.astype(np.float64))
-    centre = np.bincount(cell, have * h) / np.maximum(n, 1)
-    hc = h - centre[cell]
-    x = np.stack([np.ones_like(h), hc, hc * hc, turn1, turn2], axis=1)
-    use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
-    return cell, x, use
-
-
-def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Batched a^-1 b for moment matrices, with a tiny ridge: empty or degenerate cells
-    (a turn term that never varies) give finite coefficients."""
-    scale = np.trace(a, axis1=-2, axis2=-1)[..., None, None] + 1e-12
-    ridge = 1e-10 * scale * np.eye(a.shape[-1])
-    return np.linalg.solve(a + ridge, b)
-
-
-def _wrap(d: np.ndarray) -> np.ndarray:
-    return np.mod(d + 180.0, 360.0) - 180.0
+    return {'res_n': _by(ep, use[:, None].astype(np.float64), episodes),
+            'res_s2': _by(ep, (e[:, :, None] * e[:, None, :]).reshape(n, -1),
+                          episodes).reshape(episodes, 8, 8),
+            'res_lag_n': _by(ep, lagged[:, None].astype(np.float64), episodes),
+            'res_lag_s': _by(ep, lag * lagged[:, None], episodes)}
 
 
 def _view(x: np.ndarray, level: np.ndarray, use: np.ndarray, lagged: np.ndarray,
@@ -202,30 +147,19 @@ def _still(b, sums, s):
 
 
 def _residual(b, sums, s):
-    """The heading-residual view, every cell's fit redone in each replicate: each cell's
-    residual covariance (over its degrees of freedom), pooled with weights its count.
-    One spread per sensor: where the light is steep a band's residuals are not noise
-    alone."""
-    cn = b.part(sums, 'res_cn')[:, s]                                  # (R, C)
-    xx, xr = b.part(sums, 'res_xx')[:, s], b.part(sums, 'res_xr')[:, s]
-    fitted = np.einsum('rcik,rcil->rckl', xr, _solve(xx, xr))
-    rss = b.part(sums, 'res_rr')[:, s] - fitted                       # (R, C, 8, 8)
-    full = cn >= REGRESSORS + 1
-    # each cell's unbiased covariance, weighted by its count: the same target whatever
-    # the number of copies (weights n - 5 would favour busy cells more in short data)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        weight = np.where(full, cn / (cn - REGRESSORS), 0.0)
-    dof = np.where(full, cn, 0.0).sum(axis=1)
-    cov = (rss * weight[..., None, None]).sum(axis=1) / dof[:, None, None]
+    """The heading-residual view: each sensor's residuals at its own delay, scaled for
+    their cells' degrees of freedom (``gap.headinglag``).  One spread per sensor: where
+    the light is steep a band's residuals are not noise alone."""
     n = b.part(sums, 'res_n')[:, s, 0]
-    bands = [('level 0-525', np.repeat(dof[:, None], 8, axis=1),
+    cov = b.part(sums, 'res_s2')[:, s] / n[:, None, None]
+    bands = [('level 0-525', np.repeat(n[:, None], 8, axis=1),
               np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)))]
     lag_n = b.part(sums, 'res_lag_n')[:, s, 0]
     lag = None
     if lag_n[0] >= 8:
         lag = b.part(sums, 'res_lag_s')[:, s] / lag_n[:, None] \
-            / (b.part(sums, 'res_e2')[:, s] / n[:, None])
-    return dof, cov, bands, lag
+            / np.diagonal(cov, axis1=-2, axis2=-1)
+    return n, cov, bands, lag
 
 
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation', 'loop_change_correlation')
