@@ -28,7 +28,7 @@ from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import closednoise, fitturn, limits, ownwander, pileup, spreadlaw, timesig
+from . import closednoise, fitlatency, fitturn, limits, ownwander, pileup, spreadlaw, timesig
 from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
 from .fitbase import golden as _golden, rows as _rows
 from .groups import cluster, excess_evidence, part_evidence
@@ -404,6 +404,7 @@ def latency(target: Target, c: Comparison) -> Candidate:
     # statistics other than noise ones (other sensor effects act on those too)
     options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
         k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
+    options |= {s for s in [fitlatency.delayed_sensors(target.recordings)] if s}
     families = {k.family for k in target.real.keys} - closednoise.FAMILIES
     sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
         target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),
