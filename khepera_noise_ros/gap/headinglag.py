@@ -18,6 +18,7 @@ LAGS = (0, 1, 2, 3)               # delays tried (a sensor latency of up to thre
 HEADING_BIN = 10.0                # degrees per heading bin
 BIN_DENSITY = 0.5                 # samples per episode a heading bin needs to be used
 REGRESSORS = 5                    # per cell: level, heading, its square, two turns
+CLEAR = 0.9                       # a design is preferred where it leaves a tenth less
 
 
 def residuals(r, heading, condition, pair, episodes: int):
@@ -27,6 +28,32 @@ def residuals(r, heading, condition, pair, episodes: int):
     estimate the noise variance whatever the cell's count; rows with fewer than
     max(LAGS) + 1 earlier steps in the episode, or in a cell too rarely visited in a
     chosen design, are not usable (zero residual)."""
+    fits, have, var = _fits(r, heading, condition, pair, episodes)
+    if var is None:
+        return np.zeros_like(r), np.zeros(len(r), bool), np.zeros(r.shape[1], np.int64)
+    lag = np.where(delayed(var), np.argmin(var, axis=0), 0)
+    e = np.stack([fits[lag[k]][0][:, k] for k in range(r.shape[1])], axis=1)
+    use = have & np.logical_and.reduce([fits[j][1] for j in np.unique(lag)])
+    return np.where(use[:, None], e, 0.0), use, np.asarray(LAGS)[lag]
+
+
+def variances(r, heading, condition, pair, episodes: int):
+    """(lags, 8) residual variance of each sensor at each delay (None without rows)."""
+    return _fits(r, heading, condition, pair, episodes)[2]
+
+
+def delayed(var: np.ndarray) -> np.ndarray:
+    """Per sensor: a delay leaves clearly less (by a tenth) than the undelayed design.  On
+    a flat light every delay fits alike; there the undelayed design is the default."""
+    return var[1:].min(axis=0) < CLEAR * var[0]
+
+
+def prompt(var: np.ndarray) -> np.ndarray:
+    """Per sensor: the undelayed design leaves clearly less than every delay."""
+    return var[0] < CLEAR * var[1:].min(axis=0)
+
+
+def _fits(r, heading, condition, pair, episodes: int):
     _, cond = np.unique(condition, return_inverse=True)
     h = np.mod(heading + 180.0, 360.0)
     have = pair.copy()
@@ -35,16 +62,8 @@ def residuals(r, heading, condition, pair, episodes: int):
     fits = [_fit(r, h, cond, have, lag, episodes) for lag in LAGS]
     common = have & np.logical_and.reduce([ok for _, ok in fits])
     if not common.any():
-        return np.zeros_like(r), common, np.zeros(r.shape[1], np.int64)
-    var = np.stack([np.mean(e[common] ** 2, axis=0) for e, _ in fits])      # (lags, 8)
-    # a delay is kept only where it leaves clearly less: on a flat light every delay
-    # fits alike, and the undelayed design is the default there
-    best = np.argmin(var, axis=0)
-    keep = var[best, np.arange(r.shape[1])] < 0.9 * var[0]
-    lag = np.where(keep, best, 0)
-    e = np.stack([fits[lag[k]][0][:, k] for k in range(r.shape[1])], axis=1)
-    use = have & np.logical_and.reduce([fits[j][1] for j in np.unique(lag)])
-    return np.where(use[:, None], e, 0.0), use, np.asarray(LAGS)[lag]
+        return fits, have, None
+    return fits, have, np.stack([np.mean(e[common] ** 2, axis=0) for e, _ in fits])
 
 
 def _fit(r, h, cond, have, lag: int, episodes: int):
