@@ -13,6 +13,7 @@ simulated side.  See docs/diagnosis.md ("Heading residuals at each sensor's dela
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 
 LAGS = (0, 1, 2, 3)               # delays tried (a sensor latency of up to three steps)
 HEADING_BIN = 10.0                # degrees per heading bin
@@ -78,12 +79,13 @@ def _fit(r, h, cond, have, lag: int, episodes: int):
     turns = [_wrap(_shift(h, j) - at) for j in near]
     x = np.stack([np.ones_like(h), hc, hc * hc] + turns, axis=1)
     use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
-    cells = int(cell.max()) + 1
+    cells, n, k = int(cell.max()) + 1, len(h), r.shape[1]
     w = use.astype(np.float64)
-    xx = np.zeros((cells, REGRESSORS, REGRESSORS))
-    xr = np.zeros((cells, REGRESSORS, r.shape[1]))
-    np.add.at(xx, cell, w[:, None, None] * x[:, :, None] * x[:, None, :])
-    np.add.at(xr, cell, w[:, None, None] * x[:, :, None] * r[:, None, :])
+    pick = sparse.csr_matrix((w, (cell, np.arange(n))), shape=(cells, n))
+    xx = np.asarray(pick @ (x[:, :, None] * x[:, None, :]).reshape(n, -1)).reshape(
+        cells, REGRESSORS, REGRESSORS)
+    xr = np.asarray(pick @ (x[:, :, None] * r[:, None, :]).reshape(n, -1)).reshape(
+        cells, REGRESSORS, k)
     scale = np.trace(xx, axis1=-2, axis2=-1)[..., None, None] + 1e-12
     beta = np.linalg.solve(xx + 1e-10 * scale * np.eye(REGRESSORS), xr)
     e = r - np.einsum('ni,nik->nk', x, beta[cell])
