@@ -33,8 +33,8 @@ def _get(stats, family, sensors):
 
 
 def test_residuals_at_each_sensors_delay_are_the_noise_alone():
-    """A latency of three steps on five sensors: under the undelayed fit those sensors'
-    residuals were the light of three headings back (sd 30-60 readings against a noise
+    """A latency of three steps on five sensors: under the undelayed fit the residuals
+    of a lit one held the light of three headings back (sd 14 readings against a noise
     of 5); at their own delay they are the noise, as in the recording without the
     latency, and the pair's shared noise shows in their correlation."""
     pair = fx.CorrelatedNoise((PAIR,), 0.03)
@@ -84,3 +84,16 @@ def test_a_latency_alone_gains_no_sensor_effect():
     names = [c['name'] for c in out['compound']['chosen']] if out['compound'] else \
         [out['top_effect']]
     assert names == ['sensor_latency'], names
+
+
+def test_the_latencys_sensor_set_leaves_out_the_sensors_that_read_at_once():
+    """A latency on two of the four sensors the lamp lights here (s4-s7): the two lit
+    ones that read the heading of the moment are left out of the set; s0-s3, on a flat
+    light, may lag unseen and stay in.  Without headings there is no set from them."""
+    from khepera_noise_ros.gap import fitlatency
+    rec = tracked([fx.SensorLatency((4, 5), 2)], episodes=16)
+    got = set(fitlatency.delayed_sensors([rec]))
+    assert {4, 5} <= got and not got & {6, 7}, got
+    assert fitlatency.delayed_sensors([tracked([], episodes=16)]) == ()
+    rec.heading_deg[:] = np.nan
+    assert fitlatency.delayed_sensors([rec]) == ()
