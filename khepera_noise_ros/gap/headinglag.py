@@ -26,21 +26,21 @@ def residuals(r, heading, condition, pair, episodes: int):
     """(residuals (N, 8), usable rows (N,), delay per sensor (8,)).
 
     Residuals are scaled by sqrt(n / (n - REGRESSORS)) of their cell, so their squares
-    estimate the noise variance whatever the cell's count; rows with fewer than
-    max(LAGS) + 1 earlier steps in the episode, or in a cell too rarely visited in a
-    chosen design, are not usable (zero residual)."""
-    fits, have, var = _fits(r, heading, condition, pair, episodes)
+    estimate the noise variance whatever the cell's count; rows without the earlier
+    steps a chosen design reaches back to, or in a cell it visits too rarely, are not
+    usable (zero residual).  The delays are chosen on the rows every design can use."""
+    fits, var = _fits(r, heading, condition, pair, episodes)
     if var is None:
         return np.zeros_like(r), np.zeros(len(r), bool), np.zeros(r.shape[1], np.int64)
     lag = np.where(delayed(var), np.argmin(var, axis=0), 0)
     e = np.stack([fits[lag[k]][0][:, k] for k in range(r.shape[1])], axis=1)
-    use = have & np.logical_and.reduce([fits[j][1] for j in np.unique(lag)])
+    use = np.logical_and.reduce([fits[j][1] for j in np.unique(lag)])
     return np.where(use[:, None], e, 0.0), use, np.asarray(LAGS)[lag]
 
 
 def variances(r, heading, condition, pair, episodes: int):
     """(lags, 8) residual variance of each sensor at each delay (None without rows)."""
-    return _fits(r, heading, condition, pair, episodes)[2]
+    return _fits(r, heading, condition, pair, episodes)[1]
 
 
 def delayed(var: np.ndarray) -> np.ndarray:
@@ -57,14 +57,15 @@ def prompt(var: np.ndarray) -> np.ndarray:
 def _fits(r, heading, condition, pair, episodes: int):
     _, cond = np.unique(condition, return_inverse=True)
     h = np.mod(heading + 180.0, 360.0)
-    have = pair.copy()
-    for j in range(1, max(LAGS) + 1):            # max(LAGS) + 1 consecutive earlier steps
-        have &= np.r_[np.zeros(j, bool), pair[:-j]]
-    fits = [_fit(r, h, cond, have, lag, episodes) for lag in LAGS]
-    common = have & np.logical_and.reduce([ok for _, ok in fits])
+    have = [pair.copy()]                         # have[j]: j + 1 earlier steps in the episode
+    for j in range(1, max(LAGS) + 1):
+        have.append(have[-1] & np.r_[np.zeros(j, bool), pair[:-j]])
+    # the design at delay L reaches back to h(t-L-1) (the undelayed one to h(t-2))
+    fits = [_fit(r, h, cond, have[max(lag, 1)], lag, episodes) for lag in LAGS]
+    common = np.logical_and.reduce([ok for _, ok in fits])
     if not common.any():
-        return fits, have, None
-    return fits, have, np.stack([np.mean(e[common] ** 2, axis=0) for e, _ in fits])
+        return fits, None
+    return fits, np.stack([np.mean(e[common] ** 2, axis=0) for e, _ in fits])
 
 
 def _fit(r, h, cond, have, lag: int, episodes: int):
