@@ -42,7 +42,7 @@ from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 
 LOOP = ('actuator_turn_error', 'sensor_latency')
-PARTS = ('stationary', 'closed_loop', 'closed_loop_noise')
+PARTS = compound.PARTS   # stationary, closed loop, its noise, dropouts, loop values
 
 
 def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:

@@ -10,7 +10,8 @@ the discrepancy before any effect, or ``MIN_LOCAL`` of one protocol's own (a
 turn error acts only on the closed-loop statistics), or ``MIN_LEFT`` of what
 the chosen effects leave of one protocol's (checked again on a second
 simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
-same resampled real data against both simulators).  With the best candidate
+same resampled real data against both simulators), or, failing that test, in those of
+the one part it acts on (``partstep``).  With the best candidate
 the effects chosen earlier are refitted given the others (one backfitting
 pass), each refit kept only where it lowers the *fitting* part's discrepancy,
 the refitted set only where the held-out one does not rise; so too with any
