@@ -1,6 +1,6 @@
 """Compound steps a small part explains, from ``blind_compound.py --out`` files (prints).
 
-    python benchmark/part_steps.py BEFORE.json [AFTER.json]
+    python benchmark/part_steps.py BEFORE.json [AFTER.json]     (or the printed .txt output)
 
 For each case of BEFORE: the rejected candidates whose step fails the overall paired
 test (p >= STEP_ALPHA) while one part's own paired p passes (p < STEP_ALPHA, the step
@@ -11,6 +11,7 @@ AFTER (the same cases, diagnosed again): the steps counted by one part (``counte
 """
 from __future__ import annotations
 
+import ast
 import json
 import sys
 from pathlib import Path
@@ -35,12 +36,29 @@ def masked(entry: dict) -> str:
     return good[0] if still else ''
 
 
+def _cases(path: Path) -> dict:
+    """Per case {'case', 'truth', 'answer', 'rejected', 'steps'}: from ``--out`` JSON, or
+    (rejected entries only) from the printed output of a run cut short."""
+    if path.suffix == '.json':
+        return {r['case']: r for r in json.loads(path.read_text())['cases']}
+    out, case = {}, None
+    for line in path.read_text().splitlines():
+        if line[:3] in ('ok ', 'XX ') and ' case ' in line:
+            head = line.split('case', 1)[1].split()
+            case = int(head[0])
+            out[case] = {'case': case, 'truth': head[1].split('+'), 'rejected': [],
+                         'answer': [] if head[3] == '-' else head[3].split('+'), 'steps': []}
+        elif line.strip().startswith('rejected [') and case is not None:
+            out[case]['rejected'] = ast.literal_eval(line.strip()[len('rejected '):])
+    return out
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if not 1 <= len(argv) <= 2:
         print('usage: part_steps.py BEFORE.json [AFTER.json]', file=sys.stderr)
         return 2
-    before = {r['case']: r for r in json.loads(Path(argv[0]).read_text())['cases']}
+    before = _cases(Path(argv[0]))
     found = 0
     for k, r in sorted(before.items()):
         for e in r.get('rejected') or []:
@@ -52,7 +70,7 @@ def main(argv=None) -> int:
                       f"{e['p_value']:.3f}, added {e['added_reduction']:.4f}; {e['parts']}")
     print(f'{found} rejected steps explained by one part alone in {len(before)} cases')
     if len(argv) == 2:
-        after = {r['case']: r for r in json.loads(Path(argv[1]).read_text())['cases']}
+        after = _cases(Path(argv[1]))
         for k, r in sorted(after.items()):
             by_part = [s for s in r['steps'] if str(s[3]).startswith('part')]
             old = before.get(k, {}).get('answer')
