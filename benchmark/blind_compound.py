@@ -1,8 +1,8 @@
 """Blind benchmark of the compound diagnosis: 2-4 effects at once (prints figures; not a test).
 
     python benchmark/blind_compound.py [--cases 24] [--seed 0] [--jobs 1] [--cache DIR]
-                                       [--hard [--loop-only [--tracked]]] [--only K ...]
-                                       [--out FILE.json]
+                                       [--hard [--loop-only [--tracked]] [--shape S]]
+                                       [--only K ...] [--no-part-rule] [--out FILE.json]
 
 Each case sets 2-4 effects of the emulated robot (``reality`` effects) at once, each
 at a random location and strength drawn as ``blind_gap.py`` draws a single one; every
@@ -17,7 +17,9 @@ before any effect and after the chosen ones.  ``--cache`` keeps the recordings, 
 change to the diagnosis is measured on the same data.  ``--hard`` draws the cases of
 ``hard_compound.py`` instead: a strong loop effect beside weaker sensor effects;
 ``--loop-only`` records those cases closed-loop only (``hard_compound.loop_only``),
-``--tracked`` with the headings kept in every case (20 episodes).
+``--tracked`` with the headings kept in every case (20 episodes);
+``--shape`` draws one sensor shape in every case (a small part beside the loop effect).
+``--no-part-rule`` judges the steps as before ``gap/partstep.py``.
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 
 LOOP = ('actuator_turn_error', 'sensor_latency')
-PARTS = ('stationary', 'closed_loop', 'closed_loop_noise')
+PARTS = compound.PARTS   # stationary, closed loop, its noise, dropouts, loop values
 
 
 def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
@@ -64,10 +66,10 @@ def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
 
 
 def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
-                loop_only: bool = False, tracked: bool = False):
+                loop_only: bool = False, tracked: bool = False, shape: str | None = None):
     if hard:
         seed = int(rng.integers(0, 2 ** 31))
-        names, config, added, truth = hard_compound.draw(rng, seed)
+        names, config, added, truth = hard_compound.draw(rng, seed, shape)
         how = hard_compound.plan(rng)
         if loop_only:                     # the same draws, recorded closed-loop only
             how = hard_compound.loop_only(k, seed, tracked)
@@ -76,6 +78,7 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
         names, config, truth = draw_compound(rng, k)
         seed = int(rng.integers(0, 2 ** 31))
     tag = (('tracked' if tracked else 'loop') if loop_only else 'hard') if hard else 'case'
+    tag += f'_{shape}' if shape else ''
     path = None if cache is None else cache / f'{tag}{k:03d}_{seed}.pkl'
     if path is not None and path.exists():
         return names, truth, pickle.loads(path.read_bytes())
@@ -172,12 +175,18 @@ def main(argv=None) -> int:
     p.add_argument('--tracked', action='store_true',
                    help='with --loop-only: headings kept in every case (a tracked robot), '
                         '20 episodes')
+    p.add_argument('--shape', choices=hard_compound.SHAPES, default=None,
+                   help='with --hard: this sensor shape in every case (e.g. dropout beside '
+                        'the loop effect)')
+    p.add_argument('--no-part-rule', action='store_true',
+                   help='judge steps without the one-part rule (compound.PART_RULE off)')
     p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
     args = p.parse_args(argv)
-    if args.loop_only and not args.hard:
-        p.error('--loop-only needs --hard')
+    if (args.loop_only or args.shape) and not args.hard:
+        p.error('--loop-only and --shape need --hard')
     if args.tracked and not args.loop_only:
         p.error('--tracked needs --loop-only')
+    compound.PART_RULE = not args.no_part_rule
     if args.jobs < 1:
         p.error(f'--jobs must be >= 1, got {args.jobs}')
     if args.cache is not None:
@@ -189,7 +198,7 @@ def main(argv=None) -> int:
     jobs = []
     for k in range(args.cases):
         names, truth, recordings = _recordings(k, rng, genome, args.cache, args.hard,
-                                               args.loop_only, args.tracked)
+                                               args.loop_only, args.tracked, args.shape)
         if args.only is None or k in args.only:
             jobs.append((k, names, truth, recordings, options))
     rows = []

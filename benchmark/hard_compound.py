@@ -146,8 +146,9 @@ def _shape(rng, shape: str, seed: int) -> tuple[dict, list, dict]:
     raise ValueError(f'unknown shape {shape!r}; allowed: {", ".join(SHAPES)}')
 
 
-def draw(rng, seed: int) -> tuple[list, emu.EffectsConfig, list, dict]:
-    """(effect names, emulator configuration, added processes, truth per shape)."""
+def draw(rng, seed: int, shape: str | None = None) -> tuple:
+    """(effect names, emulator configuration, added processes, truth per shape);
+    ``shape``: one sensor shape always drawn among them (the others as before)."""
     settings, added, truth = {}, [], {}
     loop = rng.choice(['latency', 'turn', 'both'], p=[0.45, 0.3, 0.25])
     if loop in ('latency', 'both'):
@@ -162,17 +163,22 @@ def draw(rng, seed: int) -> tuple[list, emu.EffectsConfig, list, dict]:
         truth['turn'] = settings['actuator_turn_error']
     names = set(settings)
     want, drawn = int(rng.integers(1, 4)), 0
-    for shape in rng.permutation(SHAPES):
+    order = list(rng.permutation(SHAPES))
+    if shape is not None:
+        if shape not in SHAPES:
+            raise ValueError(f'unknown shape {shape!r}; allowed: {", ".join(SHAPES)}')
+        order = [shape] + [x for x in order if x != shape]
+    for name in order:
         if drawn == want:
             break
-        if NAME[shape] in names:
+        if NAME[name] in names:
             continue
         drawn += 1
-        emulated, processes, s = _shape(rng, str(shape), seed + len(truth))
+        emulated, processes, s = _shape(rng, str(name), seed + len(truth))
         settings.update(emulated)
         added += processes
-        names.add(NAME[shape])
-        truth[str(shape)] = {k: list(v) if isinstance(v, tuple) else v for k, v in s.items()}
+        names.add(NAME[name])
+        truth[str(name)] = {k: list(v) if isinstance(v, tuple) else v for k, v in s.items()}
     base = emu.EffectsConfig.none(blind_gap.SENSOR_NOISE)
     config = base.only(*[n for n in settings], **settings)
     return sorted(names), config, added, truth

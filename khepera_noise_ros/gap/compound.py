@@ -10,7 +10,8 @@ the discrepancy before any effect, or ``MIN_LOCAL`` of one protocol's own (a
 turn error acts only on the closed-loop statistics), or ``MIN_LEFT`` of what
 the chosen effects leave of one protocol's (checked again on a second
 simulator seed), and in ``1 - alpha`` of the paired bootstrap replicates (the
-same resampled real data against both simulators).  With the best candidate
+same resampled real data against both simulators), or, failing that test, in those of
+the one part it acts on (``partstep``).  With the best candidate
 the effects chosen earlier are refitted given the others (one backfitting
 pass), each refit kept only where it lowers the *fitting* part's discrepancy,
 the refitted set only where the held-out one does not rise; so too with any
@@ -27,7 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import effects as fx
-from . import closednoise, dropout, fit, loopvalues
+from . import closednoise, dropout, fit, loopvalues, partstep
+from .partstep import paired_p  # noqa: F401 - compound.paired_p, as before
 from .target import Target
 from .where import Z_CAP, discrepancy
 
@@ -51,6 +53,8 @@ CONFIRM_SEED = 5003       # offset of the second simulator seed a MIN_LEFT step 
 # the MIN_LEFT and family rules only above the chance mean + CHANCE_SDS sds.
 CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
 WIDENED = ('level', 'spread')   # statistics whose error bars a drift's wander widens
+PART = partstep.Rule(STEP_ALPHA, MIN_LOCAL, MIN_LEFT, CONFIRM_SEED)
+PART_RULE = True          # a step may count by one part's own replicates (``partstep``)
 
 
 @dataclass
@@ -86,14 +90,6 @@ def entry(effect, note: str, d_before: float, d_after: float, d_prev: float,
             'added_reduction': (d_prev - d_after) / d_before if d_before > 0 else 0.0,
             'cumulative_reduction': 1.0 - d_after / d_before if d_before > 0 else 0.0,
             'p_value': p, 'note': note}
-
-
-def paired_p(before: np.ndarray, after: np.ndarray, d_prev: float, d_new: float) -> float:
-    """One-sided p that ``after`` does not lower the discrepancy: the paired replicate
-    differences, centred on the estimate's difference (as ``diagnose._score`` does)."""
-    diff = before - after
-    diff = diff + (d_prev - d_new) - np.median(diff)
-    return float((np.sum(diff <= 0) + 1) / (diff.size + 1))
 
 
 def select(a: Target, b: Target, first, names, d_before: float, before_reps: np.ndarray,
@@ -244,6 +240,9 @@ def _judge(b: Target, first_cmp, current_cmp, current_reps, chosen: list, effect
     family = _family_gain(b, first_cmp, current_cmp, after)
     counts = _counts(added, gains, p, d_new, d_prev, lambda: _confirmed(b, chosen, effects),
                      family, lambda: _family_confirmed(b, first_cmp, chosen, effects))
+    if not counts and PART_RULE:    # a small part's share, judged on its own replicates
+        counts = partstep.counts(b, _split, _chance, first_cmp, current_cmp, after, chosen,
+                                 effects, PART)
     # only a slow wander widens the levels' error bars without bringing anything closer
     # (the level inflation of ``Target``); an effect that adds fast noise rightly widens
     # the spreads' error bars, and judged at the old ones it loses its share
@@ -426,6 +425,12 @@ def _part(c, part: str) -> float:
     (``gap.closednoise``) count on their own: sensor effects act there beside a latency
     or turn error that dominates the closed loop's other statistics."""
     return _discrepancy_of(c, lambda fam: _protocol(fam) == part)
+
+
+def _split(c) -> dict:
+    """Each part's statistics of comparison ``c`` (parts with none left out)."""
+    of = np.array([_protocol(k.family) for k in c.keys])
+    return {p: c.select(of == p) for p in PARTS if (of == p).any()}
 
 
 def _part_chance(c, part: str) -> float:
