@@ -28,13 +28,9 @@ FAMILIES = frozenset(f'loop_{v}_{s}' for v in VIEWS
 
 def episode_parts(rec, perturb_every: int, change: bool = False) -> dict:
     """{name: (episodes, ...) sums} of both views, episodes in ``np.unique`` order."""
-    episodes, ep = np.unique(rec.episode, return_inverse=True)
-    order = np.lexsort((rec.step, ep))
-    ep, steps = ep[order], rec.step[order]
+    episodes, ep, order, steps, pair = ordered(rec)
     r = rec.readings[order][:, :8].astype(np.float64)
     power = np.nan_to_num(rec.power[order], nan=1.0)
-    # a pair (t-1, t): same episode, consecutive steps
-    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
     still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
     d = np.zeros_like(r)
     d[1:] = r[1:] - r[:-1]
@@ -56,6 +52,17 @@ def episode_parts(rec, perturb_every: int, change: bool = False) -> dict:
         parts.update(_residual_parts(r, heading, rec.condition[order], pair, ep,
                                      episodes.size))
     return parts
+
+
+def ordered(rec) -> tuple:
+    """(episodes, episode index, sample order, steps, pair) of a closed-loop recording in
+    episode and step order; ``pair``: the sample and the one before it are consecutive
+    steps of one episode."""
+    episodes, ep = np.unique(rec.episode, return_inverse=True)
+    order = np.lexsort((rec.step, ep))
+    ep, steps = ep[order], rec.step[order]
+    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+    return episodes, ep, order, steps, pair
 
 
 def _residual_parts(r, heading, condition, pair, ep, episodes: int) -> dict:

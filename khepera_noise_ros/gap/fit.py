@@ -404,7 +404,9 @@ def latency(target: Target, c: Comparison) -> Candidate:
     # statistics other than noise ones (other sensor effects act on those too)
     options = {tuple(sorted(turned)), tuple(_channels(target)), tuple(sorted(turned | {
         k.sensors[0] for k, r, s, se, z in _rows(c, 'loop_residual_spread') if z > Z_DETECT}))}
-    options |= {s for s in [fitlatency.delayed_sensors(target.recordings)] if s}
+    delayed = fitlatency.delayed_sensors(target.recordings)
+    if delayed:
+        options.add(delayed)
     families = {k.family for k in target.real.keys} - closednoise.FAMILIES
     sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)), key=lambda o: (
         target.objective([fx.SensorLatency(*o)], _present(target, ('closed_loop',)),

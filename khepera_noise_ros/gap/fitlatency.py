@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import headinglag, replay
+from . import closednoise, headinglag, replay
 
 
 def delayed_sensors(recordings) -> tuple:
@@ -22,10 +22,7 @@ def delayed_sensors(recordings) -> tuple:
     for rec in recordings:
         if replay.kind(rec) != 'closed_loop' or not np.isfinite(rec.heading_deg).all():
             continue
-        episodes, ep = np.unique(rec.episode, return_inverse=True)
-        order = np.lexsort((rec.step, ep))
-        ep, steps = ep[order], rec.step[order]
-        pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+        episodes, _, order, _, pair = closednoise.ordered(rec)
         var = headinglag.variances(rec.readings[order][:, :8].astype(np.float64),
                                    rec.heading_deg[order], rec.condition[order], pair,
                                    episodes.size)
