@@ -30,8 +30,11 @@ def _chosen(config: EffectsConfig, seed: int = 1) -> list:
 
 def test_a_drift_beside_a_large_latency_is_kept():
     """A two-sample latency makes 99% of the gap (the step responses); the drift's share
-    of the whole is small, but it removes most of the level and autocorrelation
-    families' own discrepancy, which the latency does not touch."""
+    of the whole is small, but the level and autocorrelation families, which the latency
+    does not touch, carry it.  It is a wander of each sensor's own, as the robot's: the
+    run-to-run levels also move together a little (the mean of eight wanders), and
+    fitted as one change shared by all it left each sensor's own autocorrelation
+    unexplained, where a spread law then stood in (``gap.fitdrift`` fits both)."""
     config = EffectsConfig.none(0.02).only(
         'sensor_latency', 'temporal_drift',
         sensor_latency={'strength': 2, 'location': ALL},
@@ -39,8 +42,9 @@ def test_a_drift_beside_a_large_latency_is_kept():
                         'location': ALL})
     chosen = _chosen(config)
     assert [c['name'] for c in chosen] == ['sensor_latency', 'temporal_drift'], chosen
-    assert chosen[1]['added_reduction'] < compound.MIN_ADDED
-    assert chosen[1]['counted_by'] == 'family'
+    assert chosen[1]['added_reduction'] < 0.02
+    assert not chosen[1]['parameters']['shared']
+    assert 0.5 * 0.019 < chosen[1]['parameters']['sd'] < 2 * 0.019, chosen[1]
 
 
 def test_group_noise_beside_a_calibration_is_a_group_not_a_spread_law():

@@ -7,7 +7,7 @@ the computation it replaces, bit for bit.  Speed is ``benchmark/bench_diagnose.p
 """
 import numpy as np
 
-from khepera_noise_ros.gap import dropout, fit, ownwander, resample, statistics, target
+from khepera_noise_ros.gap import dropout, fit, fitdrift, ownwander, resample, statistics, target
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap.blocks import pack
 from test_gap_support import CONFIG, recorded, stationary_protocol, sums_both_ways
@@ -299,11 +299,11 @@ def test_drift_search_in_the_own_wander_box_stops_within_the_objectives_noise(mo
     t = target.Target([rec], CONFIG, 3, 'auto', replicates=40).with_given([flicker])
     c = t.compare(replicates=40)
     asked = []
-    plain = fit.minimize
-    monkeypatch.setattr(fit, 'minimize', lambda f, x0, **kw: asked.append(
+    plain = fitdrift.minimize
+    monkeypatch.setattr(fitdrift, 'minimize', lambda f, x0, **kw: asked.append(
         kw['options']['maxfev']) or plain(f, x0, **kw))
     short = fit.drift(t, c)
-    monkeypatch.setattr(fit, 'DRIFT_EVALUATIONS', (16, 16))
+    monkeypatch.setattr(fitdrift, 'DRIFT_EVALUATIONS', (16, 16))
     full = fit.drift(t, c)
     assert asked == [10, 16] and short.effect is not None and full.effect is not None
     spread = []

@@ -370,8 +370,8 @@ def _part_detail(b: Target, before, current, after) -> dict:
         d0, d1, d2 = (_part(c, part) for c in (before, current, after))
         if d0 <= 0 and d1 <= 0:
             continue
-        reps = [b.replicate_discrepancies(c.select([_protocol(k.family) == part
-                                                    for k in c.keys])) for c in (current, after)]
+        reps = [b.replicate_discrepancies(c.select(_protocols(c) == part))
+                for c in (current, after)]
         out[part] = {'before_any': round(d0, 2), 'left': round(d1, 2), 'after': round(d2, 2),
                      'gain_before_any': round((d1 - d2) / d0, 4) if d0 > 0 else 0.0,
                      'gain_left': round((d1 - d2) / d1, 4) if d1 > 0 else 0.0,
@@ -424,18 +424,27 @@ def _part(c, part: str) -> float:
     """The discrepancy of one protocol's statistics; the closed loop's noise statistics
     (``gap.closednoise``) count on their own: sensor effects act there beside a latency
     or turn error that dominates the closed loop's other statistics."""
-    return _discrepancy_of(c, lambda fam: _protocol(fam) == part)
+    keep = _protocols(c) == part
+    return discrepancy(c.z[keep]) if keep.any() else 0.0
+
+
+def _protocols(c) -> np.ndarray:
+    """Each statistic's part (``_protocol``) of comparison ``c``, worked out once."""
+    of = c.__dict__.get('_protocols')
+    if of is None:
+        of = c.__dict__['_protocols'] = np.array([_protocol(k.family) for k in c.keys])
+    return of
 
 
 def _split(c) -> dict:
     """Each part's statistics of comparison ``c`` (parts with none left out)."""
-    of = np.array([_protocol(k.family) for k in c.keys])
+    of = _protocols(c)
     return {p: c.select(of == p) for p in PARTS if (of == p).any()}
 
 
 def _part_chance(c, part: str) -> float:
     """``_chance`` of one part's statistics in comparison ``c``."""
-    return _chance(sum(_protocol(k.family) == part for k in c.keys))
+    return _chance(int(np.sum(_protocols(c) == part)))
 
 
 def _discrepancy_of(c, wanted) -> float:
@@ -456,8 +465,8 @@ def _protocol(family: str) -> str:
 
 PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout',
          'loop_values')   # see ``_protocol``
-STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'kurtosis',
-              'spread_vs_level', 'step_response', 'mode_share', 'granularity',
+STATIONARY = {'level', 'spread', 'correlation', 'autocorrelation', 'own_autocorrelation',
+              'kurtosis', 'spread_vs_level', 'step_response', 'mode_share', 'granularity',
               'pileup'}
 
 

@@ -24,27 +24,20 @@ import math
 
 import numpy as np
 from scipy import stats as sps
-from scipy.optimize import minimize
 
 from ..recording import reading_range
 from . import effects as fx
-from . import closednoise, fitlatency, fitturn, limits, ownwander, pileup, spreadlaw, timesig
+from . import closednoise, fitlatency, fitturn, limits, pileup, spreadlaw, timesig
 from .fitbase import Z_DETECT, Candidate  # noqa: F401 (Candidate re-exported)
-from .fitbase import golden as _golden, rows as _rows
-from .groups import cluster, excess_evidence, part_evidence
+from .fitbase import by_condition as _by_condition, channels as _channels
+from .fitbase import golden as _golden, names as _names, rows as _rows
+from .fitdrift import drift
+from .groups import cluster, fast_evidence as _fast_evidence
 from .statistics import STEP_LAGS
 from .target import Target
 from .where import ALPHA, Comparison, holm
 
 ANCHOR = 525.0          # gain is about the dark end of the Khepera's scale
-MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
-# The drift's search: 16 objectives, 10 in the box the own wander bounds (there the
-# later steps gained less than the objective's noise between simulator seeds)
-DRIFT_EVALUATIONS = (16, 10)
-
-
-def _channels(target: Target) -> list[int]:
-    return list(target.recordings[0].channels_used)
 
 
 # --- sensor_gain_offset ----------------------------------------------------------------
@@ -145,27 +138,15 @@ def _grid(x: np.ndarray) -> tuple[int, int]:
     all integer readings ``x`` lie, else (1, 0)."""
     if x.size < 20 or not np.all(x == np.round(x)):
         return 1, 0
+    values, weight = np.unique(x, return_counts=True)    # a few hundred distinct readings
     for q in range(32, 1, -1):
-        counts = np.bincount(np.mod(x, q).astype(np.int64))
+        counts = np.bincount(np.mod(values, q).astype(np.int64), weights=weight)
         if counts.max() >= 0.95 * x.size:
             return q, int(counts.argmax())
     return 1, 0
 
 
 # --- correlated_noise ------------------------------------------------------------------
-
-def _fast_evidence(target: Target, c: Comparison, part: str = 'fast') -> np.ndarray:
-    """Excess correlation of the fast (or slow) part of the residuals, real against
-    simulated, from the stationary recordings; the comparison's own correlations (the
-    whole residual) when there are none."""
-    channels = _channels(target)
-    real = target.of_kind('stationary')
-    if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
-        z = excess_evidence(c, channels)[0]
-        return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z
-    sim = target.simulate(kinds=('stationary',))
-    return part_evidence(real, sim, channels, part)[0]
-
 
 def correlated(target: Target, c: Comparison) -> Candidate:
     name = fx.CorrelatedNoise.name
@@ -203,15 +184,6 @@ def _shared_strength(c: Comparison, groups) -> float:
                 num += r * sr[0] * sr[1] - s * ss[0] * ss[1]
                 den += np.mean([level[k.condition][x][1] for x in g]) ** 2
     return float(np.sqrt(max(num, 0.0) / den)) if den > 0 and num > 0 else 0.01
-
-
-def _by_condition(c: Comparison, family: str) -> dict:
-    """{condition: {sensor: (rms real, rms simulated)}} over a family's cells."""
-    acc: dict = {}
-    for k, r, s, *_ in _rows(c, family):
-        acc.setdefault(k.condition, {}).setdefault(k.sensors[0], []).append((r, s))
-    return {cond: {sensor: tuple(np.sqrt(np.mean(np.square(v), axis=0)))
-                   for sensor, v in by.items()} for cond, by in acc.items()}
 
 
 def _refine(target: Target, make, start: float, kinds=('stationary',), evaluations: int = 7):
@@ -275,106 +247,6 @@ def _level(c: Comparison, key) -> float | None:
             levels.setdefault((k.sensors, k.condition, k.part), s)
         c.__dict__['_levels'] = levels
     return levels.get((key.sensors, key.condition, key.part))
-
-
-# --- temporal_drift --------------------------------------------------------------------
-
-def drift(target: Target, c: Comparison) -> Candidate:
-    name = fx.TemporalDrift.name
-    acf = [(k, r, s, z) for k, r, s, se, z in _rows(c, 'autocorrelation')] or \
-        [(k, r, s, z) for k, r, s, se, z in _rows(c, 'loop_residual_autocorrelation')]
-    own = ownwander.of_target(target)       # each sensor's own wander, shared noise out
-    sensors = tuple(sorted(set(_combined_excess(acf)) | set(_unexplained_levels(c)) | set(own)))
-    change = timesig.of_target(target)
-    moved = bool(change and change['significant'])   # levels moving together over time
-    if moved:
-        sensors = tuple(_channels(target))
-    if not sensors:
-        return Candidate(name, None, 'no extra autocorrelation over time and no level '
-                                     'offsets beyond a fixed calibration')
-    channels = _channels(target)
-    evidence = _fast_evidence(target, c, 'slow')
-    idx = [channels.index(s) for s in sensors]
-    shared = moved or len(idx) > 1 and \
-        evidence[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
-    rho = {lag: np.mean([r - s for k, r, s, z in acf
-                         if k.sensors[0] in sensors and k.part == f'lag {lag}'] or [np.nan])
-           for lag in (1, 3)}
-    if not np.isfinite(rho[1]):
-        rho[1] = 0.0
-    if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
-        rho[3] = max(rho[1], 0.0) ** 3
-    a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
-    if own:                              # the own parts' excess, lag 10 against lag 1
-        r1, r10 = (np.median([v['acf'][lag] for v in own.values()]) for lag in (1, 10))
-        a = float(np.clip((max(r10, 1e-3) / max(r1, 1e-3)) ** (1 / 9), 0.3, 0.995))
-    tau0 = -1.0 / math.log(a)
-    spread = _by_condition(c, 'spread')
-    level = _by_condition(c, 'level')
-    ratio = [spread[cond][s][0] / level[cond][s][1] for cond in spread for s in sensors
-             if level.get(cond, {}).get(s, (0, 0))[1] > 0]
-    sd0 = float(np.sqrt(max(rho[1], 0.01)) * np.mean(ratio)) if ratio else 0.01
-    if own:
-        sd0 = float(np.median([v['sd'] for v in own.values()])) or sd0
-    if moved:             # start from the shared factors' spread, slow over the runs
-        sd0 = max(sd0, change['sd'])
-        tau0 = max(tau0, sum(len(r) for r in target.recordings) / 4)
-
-    # the own wanders' size and correlation time bound the refinement (else it drifts off
-    # to a white, a constant or a large proxy for other effects)
-    bounds = ((sd0 / 3, sd0 * 3), (max(tau0 / 4, MIN_TIME_CONSTANT), tau0 * 4)) \
-        if own and not moved else ((1e-5, 2.0), (MIN_TIME_CONSTANT, 1e5))
-
-    def make(x, shared=shared):
-        # bounded so that the model can always run: a time constant of 0 has no AR(1)
-        sd = float(np.clip(math.exp(np.clip(x[0], -12, 2)), *bounds[0]))
-        tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *bounds[1]))
-        return fx.TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
-    result = minimize(lambda x: target.objective([make(x)]), [math.log(sd0), math.log(tau0)],
-                      method='Nelder-Mead', options={
-                          'maxfev': DRIFT_EVALUATIONS[bool(own and not moved)],
-                          'initial_simplex': [
-                              [math.log(sd0), math.log(tau0)],
-                              [math.log(sd0 * 1.6), math.log(tau0)],
-                              [math.log(sd0), math.log(tau0 * 2.0)]]})
-    effect = make(result.x)
-    if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
-        other = make(result.x, not shared)
-        if target.objective([other]) < result.fun:
-            effect = other
-    kind = 'one shared wander' if effect.shared else 'a wander per sensor'
-    how = f'; levels move together over time (sd {change["sd"]:.1%})' if moved else ''
-    return Candidate(name, effect, f'slow wander on {_names(sensors)} ({kind}){how}')
-
-
-def _unexplained_levels(c: Comparison) -> tuple:
-    """Sensors whose levels stay off after the best fixed gain and offset: run-to-run
-    offsets a calibration cannot make (chi-square of the line's residuals, Holm)."""
-    rows = _rows(c, 'level')
-    sensors = sorted({k.sensors[0] for k, *_ in rows})
-    p = []
-    for sensor in sensors:
-        real, sim, se = (np.array(v) for v in zip(*[(r, m, e) for k, r, m, e, z in rows
-                                                    if k.sensors[0] == sensor]))
-        if real.size < 4 or np.ptp(sim) < 1:
-            p.append(1.0)
-            continue
-        line = np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim)
-        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), real.size - 2)))
-    adjusted = holm(np.array(p)) if p else np.array([])
-    return tuple(s for s, q in zip(sensors, adjusted) if q < ALPHA)
-
-
-def _combined_excess(rows) -> tuple:
-    """Sensors whose statistics lie above the simulation taken together (Stouffer's z over
-    conditions and lags, Holm over sensors)."""
-    by: dict = {}
-    for k, r, s, z in rows:
-        by.setdefault(k.sensors[0], []).append(z)
-    sensors = sorted(by)
-    z = np.array([np.sum(by[s]) / np.sqrt(len(by[s])) for s in sensors])
-    p = holm(sps.norm.sf(z))
-    return tuple(s for s, ps in zip(sensors, p) if ps < ALPHA)
 
 
 # --- sensor_latency --------------------------------------------------------------------
@@ -467,10 +339,6 @@ def runnable(effect) -> None:
         out = [apply(np.full((channels, 2), 200.0)) for _ in range(3)][-1]
     if not np.all(np.isfinite(out)):
         raise ValueError(f'{effect.name} gives non-finite readings with {fx.to_dict(effect)}')
-
-
-def _names(sensors) -> str:
-    return ', '.join(f's{s}' for s in sensors)
 
 
 def _groups(groups) -> str:

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .where import Comparison
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
@@ -48,3 +50,21 @@ def golden(f, lo: float, hi: float, evaluations: int) -> float:
             d = a + g * (b - a)
             fd = f(d)
     return c if fc <= fd else d
+
+
+def channels(target) -> list[int]:
+    """The channels a target's recordings use."""
+    return list(target.recordings[0].channels_used)
+
+
+def names(sensors) -> str:
+    return ', '.join(f's{s}' for s in sensors)
+
+
+def by_condition(c: Comparison, family: str) -> dict:
+    """{condition: {sensor: (rms real, rms simulated)}} over a family's cells."""
+    acc: dict = {}
+    for k, r, s, *_ in rows(c, family):
+        acc.setdefault(k.condition, {}).setdefault(k.sensors[0], []).append((r, s))
+    return {cond: {sensor: tuple(np.sqrt(np.mean(np.square(v), axis=0)))
+                   for sensor, v in by.items()} for cond, by in acc.items()}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import closednoise
 from .statistics import Stats
 from .where import Comparison
 
@@ -134,3 +135,16 @@ def _pool(parts: list) -> dict:
 def _corr(s: np.ndarray) -> np.ndarray:
     d = np.sqrt(np.clip(np.diag(s), 1e-12, None))
     return s / d[:, None] / d[None, :]
+
+
+def fast_evidence(target, c: Comparison, part: str = 'fast') -> np.ndarray:
+    """Excess correlation of the fast (or slow) part of the residuals, real against
+    simulated, from a fitting target's stationary recordings; the comparison's own
+    correlations (the whole residual) when there are none."""
+    channels = list(target.recordings[0].channels_used)
+    real = target.of_kind('stationary')
+    if not real:      # closed loop only: its noise statistics (``gap.closednoise``)
+        z = excess_evidence(c, channels)[0]
+        return closednoise.evidence(c, channels) if part == 'fast' and not z.any() else z
+    sim = target.simulate(kinds=('stationary',))
+    return part_evidence(real, sim, channels, part)[0]

@@ -59,33 +59,37 @@ def _own_parts(rec, shared_by=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     (runs, sensors) a usable mask.  The shared part is the mean of the other sensors
     among ``shared_by`` (positions in the used channels; default all)."""
     used = list(rec.channels_used)
-    ref = np.zeros(len(used), bool)
-    ref[list(range(len(used))) if shared_by is None else list(shared_by)] = True
-    acf, cov, ok = [], [], []
-    for r in replay.runs(rec):
-        if r.size < MIN_RUN + SKIP or len(used) < 3:
-            continue
-        y = rec.readings[r[SKIP:]][:, used].astype(np.float64)
-        level = y.mean(axis=0)
-        y = y - level
-        total = y[:, ref].sum(axis=1, keepdims=True)
-        count = ref.sum() - ref                          # the others among ``shared_by``
-        others = (total - y * ref) / np.maximum(count, 1)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            beta = (y * others).sum(axis=0) / (others * others).sum(axis=0)
-        e = y - np.nan_to_num(beta) * others
-        den = (e * e).sum(axis=0)
-        good = (den > 0) & (level > MIN_LEVEL)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            a = np.array([(e[:-k] * e[k:]).sum(axis=0) / den for k in LAGS])
-            c = (e[:-1] * e[1:]).sum(axis=0) / (e.shape[0] - 1) / np.square(level)
-        acf.append(np.where(good, a, np.nan))
-        cov.append(np.where(good, c, np.nan))
-        ok.append(good)
     n = len(used)
-    if not acf:
+    runs = [r[SKIP:] for r in replay.runs(rec) if r.size >= MIN_RUN + SKIP]
+    if not runs or n < 3:
         return np.empty((0, len(LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
-    return np.array(acf), np.array(cov), np.array(ok)
+    ref = np.zeros(n, bool)
+    ref[list(range(n)) if shared_by is None else list(shared_by)] = True
+    # every run at once: sums within runs by reduceat from each run's first row
+    sizes = np.array([r.size for r in runs])
+    starts = np.r_[0, np.cumsum(sizes)[:-1]]
+    y = rec.readings[np.concatenate(runs)][:, used].astype(np.float64)
+    level = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
+    y -= np.repeat(level, sizes, axis=0)
+    total = y[:, ref].sum(axis=1, keepdims=True)
+    count = ref.sum() - ref                          # the others among ``shared_by``
+    others = (total - y * ref) / np.maximum(count, 1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        beta = np.add.reduceat(y * others, starts, axis=0) / \
+            np.add.reduceat(others * others, starts, axis=0)
+    e = y - np.repeat(np.nan_to_num(beta), sizes, axis=0) * others
+    den = np.add.reduceat(e * e, starts, axis=0)
+    good = (den > 0) & (level > MIN_LEVEL)
+    left = np.repeat(sizes, sizes) - (np.arange(y.shape[0]) - np.repeat(starts, sizes))
+    lagged = []
+    for k in LAGS:                  # products within a run only: partners k rows on
+        product = np.zeros_like(e)
+        np.multiply(e[:-k], e[k:], out=product[:-k], where=(left[:-k] > k)[:, None])
+        lagged.append(np.add.reduceat(product, starts, axis=0))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        a = np.stack(lagged, axis=1) / den[:, None, :]
+        c = lagged[0] / (sizes - 1)[:, None] / np.square(level)
+    return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
 
 
 def _pooled(recs, shared_by=None, memo=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

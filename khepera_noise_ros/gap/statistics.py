@@ -20,7 +20,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..recording import Recording
-from . import blockcounts, blocklength, blocksums, dropout, pileup
+from . import blockcounts, blocklength, blocksums, dropout, ownpart, pileup
 from .blocks import FACTORS, MODULI, Blocks, Key, Stats, pack  # noqa: F401 (re-exported)
 from .closedloop import closed_loop_blocks as _closed_loop_blocks, closed_loop_stats
 from .resample import resampled, stratum_sums, weights  # noqa: F401 (re-exported)
@@ -166,6 +166,10 @@ def stationary_blocks(rec: Recording, channels, length: int,
              else blockcounts.upper_of(rows(at)))
     sums.add('s4', cut, lambda at: np.square(np.square(rows(at))))
     _lagged(lay, y32, nb, sums)
+    own = inorder(ownpart.residuals(y, lay))
+    own_rows = blocksums.taken(own)
+    sums.add('own_s2', cut, lambda at: np.square(own_rows(at)))
+    _lagged(lay, own, nb, sums, 'own_lag_s')
     integer = bool(np.all(x == np.round(x)))
     if integer:
         cells = (len(lay['labels']), lay['cell'], inorder(lay['cell']))
@@ -191,7 +195,8 @@ def _shapes(c: int) -> dict:
     sums of readings, then counts (whole numbers, from 'n'), then the parts that are zero
     in all but a few blocks (from 'dropped'; ``resample._picked`` uses the order)."""
     return {'sx': (c,), 's1': (c,), 's2': (c * (c + 1) // 2,), 's4': (c,),
-            'lag_s': (len(LAGS), c), 'n': (1,), 'lag_n': (len(LAGS),), 'at_mode': (c,),
+            'lag_s': (len(LAGS), c), 'own_s2': (c,), 'own_lag_s': (len(LAGS), c),
+            'n': (1,), 'lag_n': (len(LAGS),), 'at_mode': (c,),
             'residue': (c, len(MODULI)), 'edge': (c, 2), 'dropped': (c, 2),
             'step_dd': (STEP_LAGS, c), 'step_d2': (STEP_LAGS, c)}
 
@@ -285,9 +290,11 @@ def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list:
     return out
 
 
-def _lagged(lay: dict, y: np.ndarray, blocks: int, sums: blocksums.Packer) -> None:
+def _lagged(lay: dict, y: np.ndarray, blocks: int, sums: blocksums.Packer,
+            part: str = 'lag_s') -> None:
     """Products of residues ``lag`` steps apart in the same run, credited to the block of
-    the first sample: (blocks, lags) counts ``lag_n`` and (blocks, lags, C) sums ``lag_s``."""
+    the first sample: (blocks, lags, C) sums ``part`` and, of ``lag_s``, (blocks, lags)
+    counts ``lag_n``."""
     if 'lag_segments' not in lay:       # the same for every replay of the protocol
         lay['lag_segments'] = [(np.bincount(lay['block'][hit], minlength=blocks),
                                 _segments(lay['block'][hit], blocks))
@@ -295,8 +302,9 @@ def _lagged(lay: dict, y: np.ndarray, blocks: int, sums: blocksums.Packer) -> No
     if 'lag_shifts' not in lay:     # each partner ``lag`` rows on: products of shifted rows
         lay['lag_shifts'] = [_shifted(lay, hit, partner, lag)
                              for lag, (hit, partner) in zip(LAGS, lay['lags'])]
-    sums.put('lag_n', np.stack([count for count, _ in lay['lag_segments']], axis=1)
-             .astype(np.float64))
+    if part == 'lag_s':
+        sums.put('lag_n', np.stack([count for count, _ in lay['lag_segments']], axis=1)
+                 .astype(np.float64))
     for li, ((hit, partner), (_, segments), shift) in enumerate(zip(
             lay['lags'], lay['lag_segments'], lay['lag_shifts'])):
         if shift is None:
@@ -324,7 +332,7 @@ def _lagged(lay: dict, y: np.ndarray, blocks: int, sums: blocksums.Packer) -> No
                 return out
             if sums.direct:
                 cut = _cut(lay)
-        sums.add('lag_s', cut, product, li)
+        sums.add(part, cut, product, li)
 
 
 def _lag_cut(lay: dict, li: int, segments: tuple, n: int) -> blocksums.Segments:
@@ -396,6 +404,10 @@ def _stationary_stats(b: Blocks, sums: np.ndarray) -> Stats:
         total = n[:, m].sum(axis=1)
         kurt = s4 / total[:, None] / var ** 2 - 3.0
         cols += [corr[:, pairs[0], pairs[1]], acf.reshape(r, -1), kurt]
+        if len(ch) >= ownpart.MIN_CHANNELS:
+            own = ownpart.autocorrelation(b.part(sums, 'own_lag_s')[:, m].sum(axis=1),
+                                          b.part(sums, 'own_s2')[:, m].sum(axis=1))
+            cols.append(own.reshape(r, -1))
     cols.append(_slopes(level, cell_sd))
     d2 = b.part(sums, 'step_d2').sum(axis=1)                       # (R, J, C)
     timed = None
@@ -447,6 +459,9 @@ def _stationary_keys(strata: tuple, ch: tuple, timed: tuple | None, integer: boo
         keys += [Key('autocorrelation', (sensor,), c, f'lag {lag}')
                  for lag in LAGS for sensor in ch]
         keys += [Key('kurtosis', (sensor,), c, None) for sensor in ch]
+        if len(ch) >= ownpart.MIN_CHANNELS:
+            keys += [Key('own_autocorrelation', (sensor,), c, f'lag {lag}')
+                     for lag in LAGS for sensor in ch]
     keys += [Key('spread_vs_level', (sensor,), None, None) for sensor in ch]
     if timed is not None:
         keys += [Key('step_response', (sensor,), None, f'sample {j} after a change')
