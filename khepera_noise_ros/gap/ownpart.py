@@ -7,7 +7,8 @@ shares with the others (its least-squares regression on the mean residual of the
 other sensors) is taken out; the first ``SKIP`` samples of a run (the step response
 after a change of heading) are left out.  The lagged products and squares of what is
 left become the ``own_autocorrelation`` statistics, on real and simulated runs alike
-(``gap.ownwander`` locates the wandering sensors from the same own parts).
+(``gap.ownwander`` locates the wandering sensors from own parts made the same way,
+run by run).
 """
 from __future__ import annotations
 
