@@ -22,7 +22,7 @@ STEPS, SEED, TRIALS = 15, 16, 2
 CONFIG = evolution.EAConfig(population=6, generations=160)
 WORKERS = ['/chaos0', '/chaos1', '/chaos2']
 KILL_EVERY_S = 1.5
-SETTLE_S = 8.0          # a restarted worker the manager never missed counts as back after this
+SETTLE_S = 3.0          # a restarted worker the manager never missed counts as back after this
 DEADLINE_S = 150.0
 MANAGER_KILL_AT = 40             # generation
 
