@@ -37,7 +37,7 @@ from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.gap import diagnose, transfer  # noqa: E402
-from khepera_noise_ros.gap.effects import VOCABULARY  # noqa: E402
+from khepera_noise_ros.effects import VOCABULARY  # noqa: E402
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
 from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from .gap import blocklength
+from .gap import bootstrap as blocklength
 from .recording import Recording
 
 # Section 2: two light sensors one inch apart, read every second for a minute.

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core import evolution
+from ..effects import NAMES
 from ..gap import diagnose, report, simconfig, transfer
-from ..gap.effects import NAMES
-from ..gap.replay import BASES
+from ..gap.replay import BASES, condition_world, kind
 from ..recording import load
 
 HELP = 'diagnose the sim-to-real gap of recordings; fit the unmodelled effect behind it'
@@ -65,8 +65,14 @@ def run(args) -> int:
     reality = _reality(args, recordings, config)
     ea = evolution.EAConfig(population=args.transfer_population,
                             generations=args.transfer_generations)
-    result = diagnose.diagnose(recordings, options, reality,
-                               args.transfer_trials if reality else 0, ea)
+    result = diagnose.diagnose(recordings, options)
+    if result.fitted is not None and reality is not None and args.transfer_trials:
+        loop = next(r for r in recordings if kind(r) == 'closed_loop')
+        label = loop.conditions()[0]
+        result.transfer = transfer.run(config, condition_world(loop, label, config.world),
+                                       [result.fitted], reality, args.transfer_trials,
+                                       ea=ea, seed=args.seed)
+        result.transfer['condition'] = label
     paths = report.write(result, args.out, config, figures=not args.no_figures)
     _print(result, paths)
     return 0
@@ -106,11 +112,9 @@ def _reality(args, recordings, config):
         return None
     if args.transfer_emulator and args.transfer_port:
         raise ValueError('choose one of --transfer-emulator and --transfer-port')
-    loops = [r for r in recordings if r.manifest.get('protocol') == 'closed_loop'
-             or np.isfinite(r.direction).any()]
+    loops = [r for r in recordings if kind(r) == 'closed_loop']
     if not loops:
         raise ValueError('the transfer experiment needs a closed-loop recording')
-    from ..gap.replay import condition_world
     world = condition_world(loops[0], loops[0].conditions()[0], config.world)
     if args.transfer_port:
         return port_reality(args.transfer_port, world, config)

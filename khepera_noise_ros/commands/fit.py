@@ -76,10 +76,9 @@ def run(args) -> int:
 
 
 def _summary(result: noisefit.NoiseFit, source: Path) -> dict:
-    from ..gap.effects import to_dict
     return {'format': 'khepera-noise-fit/1', 'recording': str(source),
             'dependence_groups': result.groups,
             'dependence_groups_text': format_groups(result.groups),
             'dependent_level': result.dependent, 'independent_level': result.independent,
             'distribution': result.distribution, 'by_condition': result.by_condition,
-            'effects': [to_dict(e) for e in result.effects], 'notes': result.notes}
+            'effects': [e.to_dict() for e in result.effects], 'notes': result.notes}

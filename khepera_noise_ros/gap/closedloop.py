@@ -1,137 +1,440 @@
-"""Closed-loop statistics of the gap diagnosis: per-episode sums and the statistics built on
-them (fitness factors by step after a perturbation, turn power and direction, the
-regression of reading changes on the turn command, turn size where headings are
-known).  Blocks are whole episodes; see ``gap.statistics`` for the resampling.
+"""The statistics of closed-loop recordings, from per-episode sums (episodes are the blocks).
+
+The task's own: ``closed_loop_level`` per sensor; the fitness factors and the turn
+power by step after a knock; the share of right turns; the regression of the readings'
+next change on the commands u(t) and u(t-1) (``turn_response``, per sensor
+``sensor_turn_response``); with recorded headings the turn per unit of command
+(``turn_size``).  The turn's scatter by band of power (``turn_scatter``, with headings
+``turn_size_scatter``): a zero-mean random slip leaves means alone and shows there.
+The noise while the robot turns (family ``loop_<view>_<spread|correlation|
+autocorrelation>``), in three views:
+
+* ``still``: first differences where the last command did not turn the robot and no
+  knock came (the light did not move; headings need not be known);
+* ``residual`` (headings recorded): readings less a fit in heading and the two turns
+  around it within (condition, 10-degree bin) cells, each sensor at the delay (0..3
+  steps) whose heading fits it best, so that a latency leaves its noise visible;
+* ``change`` (no stationary recording, headings unknown): each reading's next change
+  less its regression on the last four commands and their products with every reading
+  (the light's part); the residual is two noise draws.
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 
+from ..core.task import fitness_factors
+from ..effects.base import Array
+from ..effects.evidence import Key
 from ..recording import Recording
-from . import closednoise, dropout, loopvalues, turnscatter
-from .blocks import FACTORS, Blocks, Key, Stats, pack
+from . import bootstrap, converter
+
+FACTORS = ('balance', 'intensity', 'turning')
+BANDS = (0.0, 175.0, 350.0)          # lower edges of the noise's level bands (readings)
+POWER_BANDS = ((0, 0), (1, 5), (6, 9))
+MIN_ROWS = 8                         # rows a statistic needs in the full data
+QUIET = 350.0                        # the change view's pairs: rows where both read dark
+QUIET_PART = f'readings >= {QUIET:g}'
+CHANGE_LAGS = 4                      # commands u(t) .. u(t - 3): a latency up to 3 steps
+DELAYS = (0, 1, 2, 3)                # delays the residual view tries
+HEADING_BIN, BIN_DENSITY, REGRESSORS, CLEAR = 10.0, 0.5, 5, 0.9
 
 
-def closed_loop_blocks(rec: Recording, perturb_every: int, loop_only: bool = False) -> Blocks:
-    """Per-episode sums of closed-loop Khepera data (8 channels, s0..s5 in front); with
-    ``loop_only`` (a diagnosis with no stationary recording), those of the value statistics
-    (``gap.loopvalues``) and of the change residuals (``gap.loopchange``) too."""
-    rec, dropped = dropout.repair_episodes(rec)      # a dropout counts once: on its own
-    conditions = rec.conditions()
-    heading_known = bool(np.isfinite(rec.heading_deg).all())
-    rows: dict[str, list] = {n: [] for n in ('n', 'level', 'factor', 'phase_n', 'power',
-                                             'right', 'xtx', 'xty', 'xty_sensor',
-                                             'scatter_n', 'scatter_xx', 'scatter_xy',
-                                             'scatter_yy', 'heading_band')}
-    stratum = []
-    for e in np.unique(rec.episode):
-        idx = np.flatnonzero(rec.episode == e)
-        idx = idx[np.argsort(rec.step[idx])]
-        r = rec.readings[idx][:, :8].astype(np.float64)
-        steps = rec.step[idx]
-        u = rec.direction[idx] * rec.power[idx]
-        phase = steps % perturb_every
-        factors = _factors(r, rec.power[idx])
-        onehot = (phase[:, None] == np.arange(perturb_every)[None, :]).astype(np.float64)
-        rows['n'].append([idx.size])
-        rows['level'].append(r.sum(axis=0))
-        rows['factor'].append(factors.T @ onehot)
-        rows['phase_n'].append(onehot.sum(axis=0))
-        rows['power'].append(rec.power[idx] @ onehot)
-        rows['right'].append([(rec.direction[idx] > 0).sum()])
-        xtx, xty, xty_sensor, scatter = _turn_moments(r, u, steps, perturb_every)
-        for name, value in scatter.items():
-            rows[name].append(value)
-        rows['xtx'].append(xtx)
-        rows['xty'].append(xty)
-        rows['xty_sensor'].append(xty_sensor)
-        rows['heading_band'].append(
-            turnscatter.heading_moments(rec.heading_deg[idx], u, steps, perturb_every)
-            if heading_known else turnscatter.empty_heading())
-        stratum.append(conditions.index(str(rec.condition[idx[0]])))
-    parts = {n: np.asarray(v, np.float64) for n, v in rows.items()}
-    parts.update(closednoise.episode_parts(rec, perturb_every, loop_only))   # noise structure
-    parts.update(dropped)
-    integer = False
-    if loop_only:
-        more, integer = loopvalues.episode_parts(rec, np.unique(rec.episode))
-        parts.update(more)
-    sums, layout = pack(parts, len(stratum))
-    return Blocks('closed_loop', tuple(range(8)), conditions, np.asarray(stratum, np.int64),
-                  sums, layout, {'perturb_every': perturb_every, 'heading': heading_known,
-                                 'loop_only': loop_only, 'integer': integer})
+def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
+    """(episodes, episode index, sample order, steps, pair): the recording in episode and
+    step order; ``pair``: the sample and the one before are consecutive steps of one."""
+    episodes, ep = np.unique(rec.episode, return_inverse=True)
+    order = np.lexsort((rec.step, ep))
+    ep, steps = ep[order], rec.step[order]
+    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+    return episodes, ep, order, steps, pair
 
 
-def _factors(r: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """(T, 3) balance, intensity, turning per step, as in core.task.fitness_factors."""
-    left, right = r[:, 0:3].mean(axis=1), r[:, 3:6].mean(axis=1)
-    balance = 1.0 - np.abs(left - right) / 525.0
-    intensity = 1.0 - (r[:, 2] + r[:, 3]) / (2 * 525.0)
-    return np.stack([balance, intensity, (power != 0).astype(np.float64)], axis=1)
+def blocks(rec: Recording, x: Array, marks: Array, perturb_every: int,
+           loop_only: bool = False) -> bootstrap.Blocks:
+    """Per-episode sums of a closed-loop recording (repaired readings ``x``); with
+    ``loop_only`` (no stationary recording beside it) the change view and the value
+    lattice too."""
+    episodes, ep, order, steps, pair = ordered(rec)
+    m = episodes.size
+    r = x[order][:, :8].astype(np.float64)
+    u = rec.direction[order] * rec.power[order]
+    heading = rec.heading_deg[order]
+    tracked = bool(np.isfinite(heading).all())
+    phase = (steps % perturb_every)[:, None] == np.arange(perturb_every)[None, :]
 
-
-def _turn_moments(r: np.ndarray, u: np.ndarray, steps: np.ndarray, perturb_every: int):
-    """Moments of the regression of the next change in readings on u(t) and u(t-1), and
-    per power band those of its scatter (``gap.turnscatter``).
-
-    Transitions into a perturbation step are left out: the knock, not the command,
-    moves the heading there.
-    """
-    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
-    ok = turnscatter.regression_rows(steps, perturb_every)
-    x = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
-    dy = imbalance[ok + 1] - imbalance[ok]
+    def by(values: Array) -> Array:
+        return _by(ep, values, m)
+    factors = np.stack(fitness_factors(r, rec.power[order]), axis=1).astype(np.float64)
+    parts = {'n': by(np.ones((len(r), 1))), 'level': by(r),
+             'factor': by(factors[:, :, None] * phase[:, None, :]), 'phase_n': by(phase * 1.0),
+             'power': by(rec.power[order][:, None] * phase),
+             'right': by((rec.direction[order] > 0)[:, None] * 1.0)}
+    # the turn regression: rows j with j - 1, j, j + 1 consecutive and j + 1 no knock (the
+    # knock, not the command, moves the heading there)
+    after = np.r_[pair[1:], False]
+    ok = np.flatnonzero(pair & after & (np.r_[steps[1:], 0] % perturb_every != 0))
+    xr = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
     dr = r[ok + 1] - r[ok]
-    return x.T @ x, x.T @ dy, x.T @ dr, turnscatter.response_moments(r, u, ok)
+    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
+    dy = imbalance[ok + 1] - imbalance[ok]
+    e = ep[ok]
+    parts['xtx'] = _by(e, xr[:, :, None] * xr[:, None, :], m)
+    parts['xty'] = _by(e, xr * dy[:, None], m)
+    parts['xty_sensor'] = _by(e, xr[:, :, None] * dr[:, None, :], m)
+    design = np.concatenate([u[ok, None], u[ok - 1, None], np.ones((ok.size, 1)), r[ok],
+                             u[ok, None] * r[ok] / 100.0], axis=1)
+    w = _bands(u[ok])
+    parts['scatter_n'] = _by(e, w, m)
+    parts['scatter_xx'] = _by(e, w[:, :, None, None] * (design[:, :, None] * design[:, None, :])
+                              [:, None], m)
+    parts['scatter_xy'] = _by(e, w[:, :, None, None] * (design[:, :, None] * dr[:, None, :])
+                              [:, None], m)
+    parts['scatter_yy'] = _by(e, w * (dr * dr).sum(axis=1)[:, None], m)
+    if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
+        t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
+        dh = (heading[t + 1] - heading[t] + 180.0) % 360.0 - 180.0
+        moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
+        parts['heading_band'] = _by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
+    parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every, loop_only))
+    parts.update(converter.loop_sums(x[order], marks[order], ep, m, loop_only))
+    conditions = rec.conditions()
+    first = rec.condition[order][np.r_[0, np.flatnonzero(np.diff(ep)) + 1]]
+    stratum = np.array([conditions.index(str(c)) for c in first], np.int64)
+    table, layout = bootstrap.pack(parts)
+    return bootstrap.Blocks('closed_loop', tuple(range(8)), conditions, stratum, table, layout,
+                            {'perturb_every': perturb_every, 'heading': tracked})
 
 
-def closed_loop_stats(b: Blocks, sums: np.ndarray) -> Stats:
-    keys, cols = [], []
-    n = b.part(sums, 'n')[..., 0]
+def _by(ep: np.ndarray, values: Array, episodes: int) -> Array:
+    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product)."""
+    pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
+                             shape=(episodes, ep.size))
+    out: Array = np.asarray(pick @ values.reshape(ep.size, -1), np.float64)
+    return out.reshape((episodes,) + values.shape[1:])
+
+
+def _bands(u: Array) -> Array:
+    """(N, 3) one-hot band of each command's |power|."""
+    p = np.abs(np.rint(u))
+    return np.stack([(p >= lo) & (p <= hi) for lo, hi in POWER_BANDS], axis=1).astype(np.float64)
+
+
+def _noise_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, steps: np.ndarray,
+                 pair: np.ndarray, r: Array, perturb_every: int,
+                 loop_only: bool) -> dict[str, Array]:
+    power = np.nan_to_num(rec.power[order], nan=1.0)
+    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
+    d, level = np.zeros_like(r), np.zeros_like(r)
+    d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
+    parts = _view('still', d, _onehot(level, still), still,
+                  still & np.r_[False, still[:-1]], ep, m, 0.5)  # var(d) = 2 var(noise)
+    heading = rec.heading_deg[order]
+    tracked = bool(np.isfinite(heading).all())
+    # the change view stands in for the residual view on a robot nobody tracked; a
+    # simulated side always knows its headings: it gives both, the real side chooses
+    if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
+        parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
+    if tracked:
+        e, use, _ = residuals(r, heading, rec.condition[order], pair, m)
+        parts.update(_view('res', e, None, use, use & pair & np.r_[False, use[:-1]], ep, m, 1.0))
+    return parts
+
+
+def _onehot(level: Array, use: np.ndarray) -> Array:
+    band = np.searchsorted(np.array(BANDS), level, side='right') - 1
+    out: Array = (band[:, None, :] == np.arange(len(BANDS))[None, :, None]) & use[:, None, None]
+    return out
+
+
+def _view(name: str, x: Array, onehot: Array | None, use: np.ndarray, lagged: np.ndarray,
+          ep: np.ndarray, m: int, scale: float) -> dict[str, Array]:
+    """Per-episode count, cross products, per-band counts and squares (by each sensor's own
+    level), and lag-1 products (``lagged``: t whose t - 1 is used too) of ``x``."""
+    xs = x * use[:, None]
+    lag = np.zeros_like(x)
+    lag[1:] = x[1:] * x[:-1]
+    out = {f'{name}_n': _by(ep, use[:, None] * 1.0, m),
+           f'{name}_s2': scale * _by(ep, xs[:, :, None] * xs[:, None, :], m),
+           f'{name}_lag_n': _by(ep, lagged[:, None] * 1.0, m),
+           f'{name}_lag_s': scale * _by(ep, lag * lagged[:, None], m)}
+    if onehot is not None:
+        out[f'{name}_band_n'] = _by(ep, onehot * 1.0, m)
+        out[f'{name}_band_s2'] = scale * _by(ep, onehot * (xs * xs)[:, None, :], m)
+    return out
+
+
+def _change_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, steps: np.ndarray,
+                  pair: np.ndarray, r: Array, power: Array,
+                  perturb_every: int) -> dict[str, Array]:
+    """The change view: residuals of each sensor's next change on the commands u(t - j)
+    and their products with every reading, fitted per condition."""
+    u = np.nan_to_num(rec.direction[order], nan=0.0) * power
+    t = np.arange(CHANGE_LAGS - 1, len(ep) - 1)
+    rows = t[(ep[t + 1] == ep[t - CHANGE_LAGS + 1]) & (steps[t + 1] - steps[t - CHANGE_LAGS + 1]
+                                                      == CHANGE_LAGS)
+             & (steps[t + 1] % perturb_every != 0)]
+    e, use = np.zeros_like(r), np.zeros(len(r), bool)
+    condition = rec.condition[order]
+    for cond in np.unique(condition):
+        at = rows[condition[rows] == cond]
+        if at.size > 2 * (CHANGE_LAGS + 4):
+            commands = np.stack([u[at - j] for j in range(CHANGE_LAGS)], axis=1)
+            design = np.concatenate([np.ones((at.size, 1)), commands, (
+                commands[:, :, None] * (r[at] / 100.0)[:, None, :]).reshape(at.size, -1)],
+                axis=1)
+            change = r[at + 1] - r[at]
+            beta, *_ = np.linalg.lstsq(design, change, rcond=None)
+            e[at], use[at] = change - design @ beta, True
+    quiet = (r >= QUIET) & use[:, None]
+    eq = e * quiet
+    both = quiet[:, :, None] & quiet[:, None, :]
+    lagged = quiet & pair[:, None]
+    lagged[1:] &= quiet[:-1]
+    lag = np.zeros_like(e)
+    lag[1:] = e[1:] * e[:-1]
+    onehot = _onehot(r, use)
+    return {'chg_band_n': _by(ep, onehot * 1.0, m),
+            'chg_band_s2': 0.5 * _by(ep, onehot * (e * e)[:, None, :], m),
+            'chg_q_n': _by(ep, both * 1.0, m), 'chg_q_xy': 0.5 * _by(ep, eq[:, :, None] *
+                                                                      eq[:, None, :], m),
+            'chg_q_xx': 0.5 * _by(ep, (eq * eq)[:, :, None] * both, m),
+            'chg_lag_n': _by(ep, lagged * 1.0, m), 'chg_lag_s': 0.5 * _by(ep, lag * lagged, m)}
+
+
+# -- the residual view's delays --------------------------------------------------------------
+
+def residuals(r: Array, heading: Array, condition: np.ndarray, pair: np.ndarray,
+              episodes: int) -> tuple[Array, np.ndarray, np.ndarray]:
+    """(residuals (N, 8) scaled to their cells' degrees of freedom, usable rows, delay per
+    sensor): each sensor keeps the delay whose design leaves a tenth less variance than
+    the undelayed one (on rows every design can use), else no delay."""
+    fits, var = delay_fits(r, heading, condition, pair, episodes)
+    if var is None:
+        return np.zeros_like(r), np.zeros(len(r), bool), np.zeros(r.shape[1], np.int64)
+    lag = np.where(var[1:].min(axis=0) < CLEAR * var[0], np.argmin(var, axis=0), 0)
+    e = np.stack([fits[lag[k]][0][:, k] for k in range(r.shape[1])], axis=1)
+    use = np.logical_and.reduce([fits[j][1] for j in np.unique(lag)])
+    return np.where(use[:, None], e, 0.0), use, np.asarray(DELAYS)[lag]
+
+
+def delay_fits(r: Array, heading: Array, condition: np.ndarray, pair: np.ndarray,
+               episodes: int) -> tuple[list[tuple[Array, np.ndarray]], Array | None]:
+    """(per delay: residuals and usable rows; (delays, 8) variance on the common rows)."""
+    _, cond = np.unique(condition, return_inverse=True)
+    h = np.mod(heading + 180.0, 360.0)
+    have = [pair.copy()]                     # have[j]: j + 1 earlier steps in the episode
+    for j in range(1, max(DELAYS) + 1):
+        have.append(have[-1] & np.r_[np.zeros(j, bool), pair[:-j]])
+    fits = [_fit(r, h, cond, have[max(lag, 1)], lag, episodes) for lag in DELAYS]
+    common = np.logical_and.reduce([ok for _, ok in fits])
+    if not common.any():
+        return fits, None
+    return fits, np.stack([np.mean(e[common] ** 2, axis=0) for e, _ in fits])
+
+
+def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
+         episodes: int) -> tuple[Array, np.ndarray]:
+    """The design at delay ``lag``: per (condition, bin of h(t - lag)) a quadratic in that
+    heading and the turns to its neighbours (at 0: to h(t - 1) and h(t - 2))."""
+    at = _shift(h, lag)
+    _, cell = np.unique(cond * 1000 + np.floor(at / HEADING_BIN).astype(np.int64),
+                        return_inverse=True)
+    n = np.bincount(cell, have.astype(np.float64))
+    hc = at - (np.bincount(cell, have * at) / np.maximum(n, 1))[cell]
+    near = (lag + 1, lag + 2) if lag == 0 else (lag + 1, lag - 1)
+    turns = [np.mod(_shift(h, j) - at + 180.0, 360.0) - 180.0 for j in near]
+    x = np.stack([np.ones_like(h), hc, hc * hc] + turns, axis=1)
+    use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
+    cells, w = int(cell.max()) + 1, use.astype(np.float64)
+    xx = _by(cell, w[:, None, None] * x[:, :, None] * x[:, None, :], cells)
+    xr = _by(cell, w[:, None, None] * x[:, :, None] * r[:, None, :], cells)
+    scale = np.trace(xx, axis1=-2, axis2=-1)[..., None, None] + 1e-12
+    beta = np.linalg.solve(xx + 1e-10 * scale * np.eye(REGRESSORS), xr)
+    e = r - np.einsum('ni,nik->nk', x, beta[cell])
+    count = np.bincount(cell, w, minlength=cells)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        inflate = np.where(count > REGRESSORS, np.sqrt(count / (count - REGRESSORS)), 0.0)
+    return np.where(use[:, None], e * inflate[cell][:, None], 0.0), use
+
+
+def _shift(h: Array, lag: int) -> Array:
+    if lag == 0:
+        return h
+    out = np.zeros_like(h)
+    out[lag:] = h[:-lag]
+    return out
+
+
+def delayed_sensors(recordings: list[Recording]) -> tuple[int, ...]:
+    """The sensors a latency may act on, from tracked closed-loop recordings: all but those
+    clearly read at the heading of the moment; none when no sensor clearly reads an
+    earlier heading."""
+    late, now = np.zeros(8, bool), np.zeros(8, bool)
+    for rec in recordings:
+        if not np.isfinite(rec.heading_deg).all():
+            continue
+        episodes, _, order, _, pair = ordered(rec)
+        _, var = delay_fits(rec.readings[order][:, :8].astype(np.float64),
+                            rec.heading_deg[order], rec.condition[order], pair, episodes.size)
+        if var is not None:
+            late |= var[1:].min(axis=0) < CLEAR * var[0]
+            now |= var[0] < CLEAR * var[1:].min(axis=0)
+    return tuple(int(k) for k in np.flatnonzero(~now)) if late.any() else ()
+
+
+# -- statistics ------------------------------------------------------------------------------
+
+def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
+    """(keys, (R,) columns) from the resampled (R, S, D) per-episode sums."""
+    keys: list[Key] = []
+    cols: list[Array] = []
+    n = b.part(s, 'n')[..., 0]
     phases = b.extra['perturb_every']
-    for s, c in enumerate(b.strata):
-        level = b.part(sums, 'level')[:, s] / n[:, s, None]
-        for k in range(8):
-            keys.append(Key('closed_loop_level', (k,), c, None))
-            cols.append(level[:, k])
-        factor = b.part(sums, 'factor')[:, s]                    # (R, 3, P)
-        count = b.part(sums, 'phase_n')[:, s]                    # (R, P)
-        power = b.part(sums, 'power')[:, s] / count
+    front = (0, 1, 2, 3, 4, 5)
+    for i, c in enumerate(b.strata):
+        level = b.part(s, 'level')[:, i] / n[:, i, None]
+        keys += [Key('closed_loop_level', (k,), c, None) for k in range(8)]
+        cols += list(level.T)
+        factor, count = b.part(s, 'factor')[:, i], b.part(s, 'phase_n')[:, i]
+        power = b.part(s, 'power')[:, i] / count
         for p in range(phases):
             part = f'step {p} after perturbation'
             for f, name in enumerate(FACTORS):
-                keys.append(Key(f'fitness_{name}', (0, 1, 2, 3, 4, 5), c, part))
+                keys.append(Key(f'fitness_{name}', front, c, part))
                 cols.append(factor[:, f, p] / count[:, p])
             keys.append(Key('turn_power', (), c, part))
             cols.append(power[:, p])
         keys.append(Key('turn_right_fraction', (), c, None))
-        cols.append(b.part(sums, 'right')[:, s, 0] / n[:, s])
-        xtx, xty = b.part(sums, 'xtx')[:, s], b.part(sums, 'xty')[:, s]
-        beta = _solve(xtx, xty[..., None])[..., 0]               # (R, 3)
+        cols.append(b.part(s, 'right')[:, i, 0] / n[:, i])
+        xtx = b.part(s, 'xtx')[:, i]
+        beta = _solve(xtx, b.part(s, 'xty')[:, i][..., None])[..., 0]
+        beta_s = _solve(xtx, b.part(s, 'xty_sensor')[:, i])
         for j, lag in enumerate(('lag 0', 'lag 1')):
-            keys.append(Key('turn_response', (0, 1, 2, 3, 4, 5), c, lag))
+            keys.append(Key('turn_response', front, c, lag))
             cols.append(beta[:, j])
-        beta_s = _solve(xtx, b.part(sums, 'xty_sensor')[:, s])   # (R, 3, 8)
         for k in range(8):
             for j, lag in enumerate(('lag 0', 'lag 1')):
                 keys.append(Key('sensor_turn_response', (k,), c, lag))
                 cols.append(beta_s[:, j, k])
-        if b.extra['heading']:          # every power 0..9 is in one band: sum the bands
-            h = b.part(sums, 'heading_band')[:, s].sum(axis=1)  # (R, 4): n, u^2, u dh, dh^2
+        if b.extra['heading']:
+            h = b.part(s, 'heading_band')[:, i].sum(axis=1)
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 2] / h[:, 1])
-        for more in (closednoise.stats, turnscatter.scatter_stats, dropout.closed_loop_stats,
-                     loopvalues.stats):
-            more_keys, more_cols = more(b, sums, s, c)
-            keys += more_keys
-            cols += more_cols
-    return Stats(keys, np.stack(cols, axis=1))
+        for more in (_noise_stats, _scatter_stats, converter.loop_stats):
+            k_, c_ = more(b, s, i, c)
+            keys += k_
+            cols += c_
+    return keys, cols
 
 
-def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _noise_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], list[Array]]:
+    keys: list[Key] = []
+    cols: list[Array] = []
+    views = [('still', 'still', 'lag 1 of differences')]
+    if b.has('res_n'):
+        views.append(('residual', 'res', 'lag 1'))
+    for view, name, lag_part in views:
+        n = b.part(s, f'{name}_n')[:, i, 0]
+        if n[0] < 8:                                   # too few samples to say anything
+            continue
+        cov = b.part(s, f'{name}_s2')[:, i] / n[:, None, None]
+        var = np.diagonal(cov, axis1=-2, axis2=-1)
+        if name == 'still':
+            band_n = b.part(s, 'still_band_n')[:, i]
+            spread = np.sqrt(b.part(s, 'still_band_s2')[:, i] / band_n)
+            bands = [(f'level {lo:g}-{hi:g}', band_n[:, j], spread[:, j])
+                     for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,)))]
+        else:      # one spread per sensor: where the light is steep a band is not noise alone
+            bands = [('level 0-525', np.repeat(n[:, None], 8, axis=1), np.sqrt(var))]
+        for part, count, spread in bands:
+            for k in range(8):
+                if count[0, k] >= 8:
+                    keys.append(Key(f'loop_{view}_spread', (k,), c, part))
+                    cols.append(spread[:, k])
+        sd = np.sqrt(var)
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
+        for k in range(8):
+            for m in range(k + 1, 8):
+                keys.append(Key(f'loop_{view}_correlation', (k, m), c, None))
+                cols.append(corr[:, k, m])
+        lag_n = b.part(s, f'{name}_lag_n')[:, i, 0]
+        if lag_n[0] >= 8:
+            lag = b.part(s, f'{name}_lag_s')[:, i] / lag_n[:, None] / var
+            keys += [Key(f'loop_{view}_autocorrelation', (k,), c, lag_part) for k in range(8)]
+            cols += list(lag.T)
+    if b.has('chg_band_n'):
+        k_, c_ = _change_stats(b, s, i, c)
+        keys, cols = keys + k_, cols + c_
+    return keys, cols
+
+
+def _change_stats(b: bootstrap.Blocks, s: Array, i: int,
+                  c: str) -> tuple[list[Key], list[Array]]:
+    keys, cols = [], []
+    band_n = b.part(s, 'chg_band_n')[:, i]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        spread = np.sqrt(b.part(s, 'chg_band_s2')[:, i] / band_n)
+        for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,))):
+            for k in range(8):
+                if band_n[0, j, k] >= MIN_ROWS:
+                    keys.append(Key('loop_change_spread', (k,), c, f'level {lo:g}-{hi:g}'))
+                    cols.append(spread[:, j, k])
+        q_n, xx = b.part(s, 'chg_q_n')[:, i], b.part(s, 'chg_q_xx')[:, i]
+        corr = b.part(s, 'chg_q_xy')[:, i] / np.sqrt(xx * np.swapaxes(xx, 1, 2))
+        for k in range(8):
+            for m in range(k + 1, 8):
+                if q_n[0, k, m] >= MIN_ROWS:
+                    keys.append(Key('loop_change_correlation', (k, m), c, QUIET_PART))
+                    cols.append(corr[:, k, m])
+        lag_n = b.part(s, 'chg_lag_n')[:, i]
+        var = np.diagonal(xx, axis1=-2, axis2=-1) / np.diagonal(q_n, axis1=-2, axis2=-1)
+        lag = b.part(s, 'chg_lag_s')[:, i] / lag_n / var
+        for k in range(8):
+            if lag_n[0, k] >= MIN_ROWS:
+                keys.append(Key('loop_change_autocorrelation', (k,), c, QUIET_PART))
+                cols.append(lag[:, k])
+    return keys, cols
+
+
+def _scatter_stats(b: bootstrap.Blocks, s: Array, i: int,
+                   c: str) -> tuple[list[Key], list[Array]]:
+    """``turn_scatter``: per power band the readings' change about the pooled regression
+    (rms over sensors); with headings ``turn_size_scatter``: the turn about the pooled
+    turn per unit of command."""
+    keys, cols = [], []
+    n, xx = b.part(s, 'scatter_n')[:, i], b.part(s, 'scatter_xx')[:, i]
+    xy, yy = b.part(s, 'scatter_xy')[:, i], b.part(s, 'scatter_yy')[:, i]
+    with np.errstate(invalid='ignore'):
+        beta = np.linalg.pinv(xx.sum(axis=1), rcond=1e-10, hermitian=True) @ xy.sum(axis=1)
+    rss = yy - 2 * np.einsum('rbik,rik->rb', xy, beta) \
+        + np.einsum('rik,rbij,rjk->rb', beta, xx, beta)
+    labels = [f'power {lo}' if lo == hi else f'power {lo}-{hi}' for lo, hi in POWER_BANDS]
+    for j, label in enumerate(labels):
+        keys.append(Key('turn_scatter', tuple(range(8)), c, label))
+        cols.append(_rms(rss[:, j], n[:, j] * 8))
+    if b.extra['heading']:
+        h = b.part(s, 'heading_band')[:, i]
+        total = h.sum(axis=1)
+        k = total[:, 2] / total[:, 1]
+        for j, label in enumerate(labels):
+            keys.append(Key('turn_size_scatter', (), c, label))
+            cols.append(_rms(h[:, j, 3] - 2 * k * h[:, j, 2] + k * k * h[:, j, 1], h[:, j, 0]))
+    return keys, cols
+
+
+def _rms(rss: Array, n: Array) -> Array:
+    """Root mean square residual; NaN where a band has fewer than 3 rows."""
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out: Array = np.where(n >= 3, np.sqrt(np.clip(rss, 0.0, None) / n), np.nan)
+    return out
+
+
+def _solve(a: Array, b: Array) -> Array:
     """Batched least squares that tolerates singular moment matrices (NaN there)."""
     out = np.full(b.shape, np.nan)
     ok = np.abs(np.linalg.det(a)) > 1e-9
     if ok.any():
         out[ok] = np.linalg.solve(a[ok], b[ok])
     return out
+

@@ -27,11 +27,13 @@ import numpy as np
 
 from ..core.khepera import SENSORS
 from ..core.noise import DISTRIBUTIONS, NoiseModel
+from ..effects import IntensityDependentNoise
+from ..effects.correlated_noise import cluster
 from ..recording import Recording
-from . import diagnose, replay, split, statistics
-from . import fit as fit_effects
-from .diagnose import MIN_REDUCTION
-from .groups import cluster, correlation_evidence
+from . import split
+from .evidence import correlation_evidence
+from .replay import Replayer, check, kind, runs
+from .select import MIN_REDUCTION
 from .simconfig import SimConfig
 from .target import Target
 
@@ -58,8 +60,8 @@ class NoiseFit:
 def fit(rec: Recording, base: SimConfig = SimConfig(), seed: int = 0,
         level_dependence: bool = True) -> NoiseFit:
     """The combination model that best describes the stationary recording ``rec``."""
-    diagnose.check([rec])
-    if replay.kind(rec) != 'stationary':
+    check([rec])
+    if kind(rec) != 'stationary':
         raise ValueError('fit needs a stationary recording (the robot held at fixed headings); '
                          'this one is closed-loop')
     result = _combination(rec, base, seed)
@@ -91,9 +93,8 @@ def fit(rec: Recording, base: SimConfig = SimConfig(), seed: int = 0,
 def _combination(rec: Recording, base: SimConfig, seed: int) -> NoiseFit:
     """Groups, levels (calibrated by simulation) and distribution of the paper's model."""
     used = rec.channels_used
-    stats = statistics.compute(statistics.stationary_blocks(
-        rec, used, statistics.block_length(rec, used)), seed=seed)
-    evidence, _ = correlation_evidence(stats, used)
+    stats = Target([rec], base, seed, base='observed').real
+    evidence = correlation_evidence(stats.keys, stats.estimate, np.sqrt(stats.variance), used)
     groups = [[used[i] for i in g] for g in cluster(evidence)]
     d, i = _solve(_moments(rec, groups))
     result = NoiseFit(groups, d, i, 'uniform')
@@ -120,7 +121,7 @@ def _combination_and_level(rec: Recording, base: SimConfig, seed: int) -> NoiseF
 def _independent_and_level(rec: Recording, base: SimConfig, seed: int) -> NoiseFit:
     """Independent noise at the level the brightest quarter of readings shows (where noise
     that grows with the level is smallest), plus shared level-dependent noise on top."""
-    levels = [rec.readings[r][:, rec.channels_used].mean(axis=0) for r in replay.runs(rec)]
+    levels = [rec.readings[r][:, rec.channels_used].mean(axis=0) for r in runs(rec)]
     bright = float(np.quantile(np.concatenate(levels), 0.25))
     _, i = _solve(_moments(rec, [], bright))
     result = NoiseFit([], 0.0, i, 'uniform')
@@ -133,7 +134,7 @@ def _independent_and_level(rec: Recording, base: SimConfig, seed: int) -> NoiseF
 def _with_intensity(rec: Recording, result: NoiseFit, base: SimConfig, seed: int) -> NoiseFit:
     target = Target([rec], _config(result, base, rec.channels), seed, base='observed',
                     replicates=100)
-    found = fit_effects.intensity(target, target.compare())
+    found = IntensityDependentNoise.fit(target.evidence(target.compare()))
     result = dataclasses.replace(result, effects=(found.effect,) if found.effect else (),
                                  notes=[n for n in result.notes
                                         if not n.startswith('distribution')])
@@ -155,7 +156,7 @@ def _moments(rec: Recording, groups, max_level: float = np.inf) -> np.ndarray:
     over sensors (those with levels up to ``max_level``), each pooled over runs."""
     rows_cov, rows_var = [], []
     member = {s: g for g in groups for s in g}
-    for run in replay.runs(rec):
+    for run in runs(rec):
         x = rec.readings[run][:, rec.channels_used]
         if x.shape[0] < 3:
             continue
@@ -198,8 +199,7 @@ def _config(result: NoiseFit, base: SimConfig, channels: int) -> SimConfig:
 
 def _simulate(rec: Recording, result: NoiseFit, base: SimConfig, seed: int) -> Recording:
     """The model at the recording's own levels (observed base), one copy."""
-    return replay.replay(rec, _config(result, base, rec.channels), seed=seed + 17,
-                         base='observed')
+    return Replayer(rec, _config(result, base, rec.channels), 'observed').replay(seed=seed + 17)
 
 
 def _distribution(rec: Recording, result: NoiseFit, base: SimConfig, seed: int) -> str:
@@ -229,7 +229,7 @@ def _by_condition(rec: Recording, groups) -> list[dict]:
 
 def _within_group_correlation(rec: Recording, groups) -> float | None:
     values = []
-    for run in replay.runs(rec):
+    for run in runs(rec):
         x = rec.readings[run]
         if x.shape[0] < 3:
             continue

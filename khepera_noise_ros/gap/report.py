@@ -19,7 +19,7 @@ import numpy as np
 from ..files import atomic_write_text, write_json
 from . import simconfig
 from .diagnose import Diagnosis
-from .where import Comparison, MARGIN
+from .compare import MARGIN, Comparison
 
 FIGURES = ('correlation.png', 'spread.png', 'shrink.png', 'effects.png')
 

@@ -6,7 +6,7 @@ The file is the one the simulator node loads with ``--ros-args --params-file``:
 ``dependence_groups`` as '0,1,2;3,4,5', ``distribution``, ``rounding``, ``seed``, the world's
 geometry, ``steps``, ``perturb_every``, ``perturbation_deg``) and ``effects``, a
 JSON list of the unmodelled effects the simulator should add (see
-``gap.effects``).  Keys the file does not give keep the simulator's defaults.
+``khepera_noise_ros.effects``).  Keys the file does not give keep the simulator's defaults.
 This module imports no ROS, so a recording can be diagnosed without it.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from ..core.khepera import World
 from ..core.noise import NoiseModel, format_groups, parse_groups
 from ..core.task import Task
 from ..files import atomic_write_text
-from . import effects as fx
+from .. import effects as fx
 
 WORLD_KEYS = tuple(f.name for f in dataclasses.fields(World))
 TASK_KEYS = ('steps', 'perturb_every', 'perturbation_deg')

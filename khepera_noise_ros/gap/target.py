@@ -1,320 +1,439 @@
-"""One set of real recordings held against the simulator, with or without added effects.
+"""Real recordings held against the simulator, with or without added effects.
 
-A ``Target`` computes the real statistics once (with bootstrap replicates) and
-replays the recordings' protocols in the simulator on demand.  ``compare``
-gives the full comparison (bootstrap variance on both sides); ``objective``
-is the cheap version used while fitting: simulated estimates only, with the
-simulated variance taken as the real one divided by the number of simulated
-copies, and common random numbers (a fixed seed) so that the objective is a
-deterministic function of the effect's parameters.
+A ``Target`` repairs the recordings' dropouts and computes their statistics once (with
+bootstrap replicates), and replays their protocols in the simulator on demand.
+``compare`` gives the full comparison (bootstrap variance on both sides); ``objective``
+is the cheap one a fit minimises: simulated estimates only, the simulated variance
+taken as the real one over the number of copies, and common random numbers (a fixed
+seed), so it is a deterministic function of the effects.  What repeated simulations
+share (replays, layouts, draws, objectives) lives in one ``Memory`` that the target and
+its ``with_given`` copies hold; nothing is remembered anywhere else.  ``evidence``
+gives an effect's fitter the target and a comparison through ``effects.Evidence``.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import Any, Sequence
 
 import numpy as np
 
-from ..recording import Recording
-from . import dropout, rarecount, replay, statistics
+from ..effects import Effect
+from ..effects.base import Array
+from ..effects.evidence import Key, Row
+from ..effects.simulate import SimCache
+from ..recording import Recording, reading_range
+from . import bootstrap, closedloop, converter, evidence, stationary
+from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors
+from .families import FAMILIES, having, of_part
+from .replay import Replayer, episodes, kind, runs
 from .simconfig import SimConfig
-from .statistics import Stats
-from .where import MARGIN, Z_CAP, Comparison, compare, discrepancy, squared_floors
 
 SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
-SIM_SAMPLES = 20_000    # simulated samples aimed at when choosing the number of copies
-# The pile at a sensor's ends (``gap.pileup``) locates and scores limits; its bootstrap
-# error ignores where an end falls, which a slow change moves, so only a limit is fitted
-# to it.  So are isolated readings at a sensor's extremes (``gap.dropout``).
-LIMITS_ONLY = frozenset({'pileup', 'dropout', 'closed_loop_dropout'})
+SIM_SAMPLES = 20_000     # simulated samples aimed at when choosing the number of copies
+REPLAYS = 16             # replays remembered
 
 
 @dataclass
+class Repaired:
+    """A recording with its dropouts repaired, their marks and each channel's extremes."""
+
+    recording: Recording
+    marks: Array
+    ends: Array
+    kind: str
+
+    @staticmethod
+    def of(rec: Recording) -> 'Repaired':
+        k = kind(rec)
+        readings, marks, ends = converter.repair(rec.readings, episodes(rec), k == 'closed_loop')
+        if readings is not rec.readings:
+            rec = dataclasses.replace(rec, readings=readings)
+        return Repaired(rec, marks, ends, k)
+
+
+@dataclass
+class Memory:
+    """What the simulations of one target and its copies share (see the module)."""
+
+    cache: SimCache = field(default_factory=SimCache)
+    replayers: dict[tuple[int, SimConfig], Replayer] = field(default_factory=dict)
+    replays: OrderedDict[tuple[Any, ...], Repaired] = field(default_factory=OrderedDict)
+    layouts: dict[tuple[int, int], stationary.Layout] = field(default_factory=dict)
+    objectives: dict[tuple[Any, ...], float] = field(default_factory=dict)
+    own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
+    plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
+
+
 class Target:
-    recordings: list[Recording]
-    config: SimConfig
-    seed: int = 0
-    base: str = 'auto'
-    copies: int | None = None     # simulated copies of the recordings; None: by size
-    replicates: int = statistics.REPLICATES
-    block_lengths: list[int] = field(default_factory=list)
-    given: tuple = ()             # effects already chosen: the simulator always has them
-    real: Stats = field(init=False)
-    kinds: list[str] = field(init=False)
+    def __init__(self, recordings: Sequence[Recording], config: SimConfig, seed: int = 0,
+                 base: str = 'auto', copies: int | None = None,
+                 replicates: int = bootstrap.REPLICATES, block_lengths: Sequence[int] = (),
+                 cache: SimCache | None = None):
+        self.real_data = [Repaired.of(r) for r in recordings]
+        self.recordings = [r.recording for r in self.real_data]
+        self.config, self.seed, self.base, self.replicates = config, seed, base, replicates
+        self.given: tuple[Effect, ...] = ()
+        n = sum(len(r) for r in self.recordings)
+        # enough simulated samples, not more: fits cost less
+        self.copies = copies or int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
+        self.kinds = [r.kind for r in self.real_data]
+        self.block_lengths = list(block_lengths) or [
+            0 if r.kind == 'closed_loop' else stationary.block_length(
+                r.recording, r.recording.channels_used) for r in self.real_data]
+        self.loop_only = 'stationary' not in self.kinds      # the loop's value statistics
+        self.memory = Memory(cache if cache is not None else SimCache())
+        self._real = [self._stats(i, r, replicates, seed + i)
+                      for i, r in enumerate(self.real_data)]
+        self.real = Stats.join(self._real)
+        self.channels = list(self.recordings[0].channels_used)
 
-    def __post_init__(self):
-        # dropouts repaired once, remembered for their own statistics and fit: every
-        # other statistic and fitter sees the repaired readings (``gap.dropout``)
-        self.recordings = [dropout.prepared(r) for r in self.recordings]
-        if self.copies is None:       # enough simulated samples, not more: fits cost less
-            n = sum(len(r) for r in self.recordings)
-            self.copies = int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
-        if not self.block_lengths:
-            self.block_lengths = [_block_length(r) for r in self.recordings]
-        self.kinds = [replay.kind(r) for r in self.recordings]
-        # closed loop alone: its value statistics stand in for the stationary ones
-        self.loop_only = 'stationary' not in self.kinds
-        self._real = [statistics.compute(_blocks(rec, n, self.config, self.loop_only),
-                                         self.replicates,
-                                         self.seed + i)
-                      for i, (rec, n) in enumerate(zip(self.recordings, self.block_lengths))]
-        self.real = _join(self._real)
-        self._objectives = {}     # objective values, shared with ``with_given`` copies
-        self.own_parts = {}       # the real recordings' own-wander parts (``gap.ownwander``)
+    # -- copies ---------------------------------------------------------------------------
 
-    def _chosen(self, kinds) -> list[int]:
-        return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
-
-    def of_kind(self, kind: str) -> list[Recording]:
-        """The (dropout-repaired) recordings of one protocol, 'stationary' or 'closed_loop'."""
-        return [self.recordings[i] for i in self._chosen((kind,))]
-
-    def simulate(self, effects=(), copies: int | None = None, kinds=None,
-                 remember: bool = True) -> list[Recording]:
-        """Replays of the recordings of ``kinds`` with ``effects`` (and the given ones);
-        ``remember=False``: not kept among the remembered replays (``_replay``)."""
-        copies = self.copies if copies is None else copies
-        effects = tuple(self.given) + tuple(effects)
-        return [_replay(self.recordings[i], self.config, effects, self.seed + 7919 * i,
-                        copies, self.base, remember) for i in self._chosen(kinds)]
-
-    def sim_stats(self, effects=(), replicates: int = 0, kinds=None) -> Stats:
-        return self._simulated(effects, replicates, kinds)[0]
-
-    def _simulated(self, effects, replicates: int, kinds,
-                   copies: int | None = None) -> tuple[Stats, np.ndarray]:
-        """Simulated statistics of all copies together, and per statistic the factor by
-        which the block bootstrap understates the variance of cell levels (see
-        ``_level_inflation``)."""
-        copies = self.copies if copies is None else copies
-        stats, factors = [], []
-        for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
-            s = statistics.compute(_blocks(sim, self.block_lengths[i], self.config, self.loop_only,
-                                           replicates == 0),
-                                   replicates, self.seed + 101 + i)
-            stats.append(s)
-            factors.append(self._level_inflation(i, sim, s, copies))
-        return _join(stats), np.concatenate(factors)
-
-    def _level_inflation(self, i: int, sim: Recording, pooled: Stats,
-                         copies: int) -> np.ndarray:
-        """Per statistic of ``pooled``: 1, except cell levels of stationary data.
-
-        A slow wander moves whole runs, which blocks within a run cannot show.  The
-        copies of the simulation are independent replays, so the spread of a level
-        between copies is its true sampling variance under the simulated model; its
-        ratio to the real data's bootstrap variance, pooled over the levels of a
-        condition, scales the variance of those levels on both sides (never below 1).
-        Cell means per copy come straight from the readings (one pass, no statistics).
-        """
-        factor = np.ones(len(pooled.keys))
-        if self.kinds[i] != 'stationary' or copies < 2:
-            return factor
-        plan = self._inflation_plan(i, sim, copies)
-        code, size, count, cells, cond, real_var, names = plan
-        x = sim.readings[:, list(self.recordings[i].channels_used)]
-        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])],
-                         axis=1).reshape(len(count), copies, x.shape[1])
-        with np.errstate(invalid='ignore', divide='ignore'):
-            means /= count[..., None]
-        spread = np.var(means, axis=1, ddof=1)[cells]             # per (cell, channel) entry
-        ok = np.isfinite(spread)
-        # sums over the entries in order, as a loop adding them one by one would
-        a = np.bincount(cond[ok], spread[ok], minlength=len(names))
-        b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
-        with np.errstate(invalid='ignore', divide='ignore'):
-            ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
-        at, of = self._level_positions(i, pooled.keys, names)
-        factor[at] = np.r_[ratio, 1.0][of]
-        return factor
-
-    def _inflation_plan(self, i: int, sim: Recording, copies: int) -> tuple:
-        """What ``_level_inflation`` needs of the protocol alone (the same for every replay
-        with ``copies`` copies): sample codes of (cell, copy), counts, and the (cell,
-        channel) entries that have a real level, with their condition and real variance."""
-        cache = self.__dict__.setdefault('_plans', {})
-        key = (i, copies)
-        if key not in cache:
-            span = int(self.recordings[i].episode.max()) + 1
-            lay = statistics._layout(sim, self.block_lengths[i])
-            labels, cell = lay['labels'], lay['cell']
-            code = cell * copies + sim.episode // span
-            size = len(labels) * copies
-            count = np.bincount(code, minlength=size).reshape(len(labels), copies)
-            used = list(self.recordings[i].channels_used)
-            real = self._real[i]
-            real_index = real.index()
-            names: dict = {}
-            entries = []
-            for c, (condition, h) in enumerate(labels):
-                part = None if h is None else f'heading {h:g} deg'
-                for k, sensor in enumerate(used):
-                    j = real_index.get(statistics.Key('level', (sensor,), condition, part))
-                    if j is not None:
-                        entries.append(((c, k), names.setdefault(condition, len(names)),
-                                        real.variance[j]))
-            cells = tuple(np.array([e[0][d] for e in entries], np.int64) for d in (0, 1))
-            cache[key] = (code, size, count, cells, np.array([e[1] for e in entries], np.int64),
-                          np.array([e[2] for e in entries], np.float64), names)
-        return cache[key]
-
-    def _level_positions(self, i: int, keys: list,
-                         names: dict) -> tuple[np.ndarray, np.ndarray]:
-        """(positions of the level statistics in ``keys``, their condition's number in
-        ``names``, len(names) if none), cached for a key list shared by replays."""
-        cache = self.__dict__.setdefault('_positions', {})
-        hit = cache.get((i, id(keys)))
-        if hit is None or hit[0] is not keys:
-            if len(cache) > 32:
-                cache.clear()
-            at = [j for j, k in enumerate(keys) if k.family == 'level']
-            of = [names.get(keys[j].condition, len(names)) for j in at]
-            hit = cache[(i, id(keys))] = (keys, np.array(at, np.int64),
-                                          np.array(of, np.int64))
-        return hit[1], hit[2]
-
-    def with_given(self, effects) -> 'Target':
-        """This target with ``effects`` always in the simulator (real statistics shared):
-        a candidate fitted against it is fitted jointly with them."""
+    def with_given(self, effects: Sequence[Effect]) -> 'Target':
+        """This target with ``effects`` always in the simulator (real statistics shared): a
+        candidate fitted against it is fitted jointly with them."""
         out = copy.copy(self)
         out.given = tuple(effects)
         return out
 
-    def compare(self, effects=(), replicates: int | None = None) -> Comparison:
-        """Real against simulated-with-``effects``, bootstrap variance on both sides (the
-        simulated side, 2-3 copies, is the more precise: ``SIM_REPLICATES`` suffice)."""
+    def with_seed(self, seed: int) -> 'Target':
+        out = copy.copy(self)
+        out.seed = seed
+        return out
+
+    def with_config(self, config: SimConfig) -> 'Target':
+        out = copy.copy(self)
+        out.config = config
+        return out
+
+    # -- simulation -----------------------------------------------------------------------
+
+    def _chosen(self, kinds: Sequence[str] | None) -> list[int]:
+        return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
+
+    def of_kind(self, kind_: str) -> list[Recording]:
+        return [self.recordings[i] for i in self._chosen((kind_,))]
+
+    def simulate(self, effects: Sequence[Effect] = (), copies: int | None = None,
+                 kinds: Sequence[str] | None = None, remember: bool = True) -> list[Repaired]:
+        """Replays (dropouts repaired) of the recordings of ``kinds`` with ``effects`` and the
+        given ones; a replay is a deterministic function of its arguments, so the last
+        ``REPLAYS`` are remembered (unless ``remember`` is False)."""
+        copies = self.copies if copies is None else copies
+        effects = tuple(self.given) + tuple(effects)
+        out = []
+        for i in self._chosen(kinds):
+            key = (i, self.config, effects, self.seed + 7919 * i, copies, self.base)
+            memo = self.memory.replays
+            hit = memo.get(key) if remember else None
+            if hit is None:
+                replayer = self._replayer(i)
+                hit = Repaired.of(replayer.replay(effects, self.seed + 7919 * i, copies))
+                hit.recording.readings.flags.writeable = False
+                if remember:
+                    memo[key] = hit
+                    if len(memo) > REPLAYS:
+                        memo.popitem(last=False)
+            else:
+                memo.move_to_end(key)
+            out.append(hit)
+        return out
+
+    def _replayer(self, i: int) -> Replayer:
+        key = (i, self.config)
+        if key not in self.memory.replayers:
+            self.memory.replayers[key] = Replayer(self.recordings[i], self.config, self.base,
+                                                  self.memory.cache)
+        return self.memory.replayers[key]
+
+    def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
+        rec = data.recording
+        if data.kind == 'closed_loop':
+            b = closedloop.blocks(rec, rec.readings, data.marks, self.config.task.perturb_every,
+                                  self.loop_only)
+        else:
+            copies = len(rec) // len(self.recordings[i])
+            key = (i, copies)
+            if key not in self.memory.layouts:
+                self.memory.layouts[key] = stationary.Layout(rec, self.block_lengths[i])
+            lay = self.memory.layouts[key]
+            used = rec.channels_used
+            x = rec.readings[:, used].astype(np.float64)
+            total = lay.by_block if replicates else lay.by_stratum   # no bootstrap: strata
+            b = stationary.blocks(rec, x, lay, total, converter.stationary_sums(
+                x, data.marks[:, used], lay.cell, lay.order, total))
+        s = bootstrap.resampled(b, replicates, seed)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            if b.kind == 'closed_loop':
+                keys, cols = closedloop.stats(b, s)
+            else:
+                keys, cols = stationary.stats(b, s)
+                more_keys, more_cols = converter.stationary_stats(b, s)
+                keys, cols = keys + more_keys, cols + more_cols
+        values = np.concatenate([c if c.ndim == 2 else c[:, None] for c in cols], axis=1)
+        return Stats(keys, values)
+
+    def _simulated(self, effects: Sequence[Effect], replicates: int,
+                   kinds: Sequence[str] | None,
+                   copies: int | None = None) -> tuple[Stats, Array]:
+        """Simulated statistics of all copies together, and per statistic the factor by which
+        the bootstrap understates the variance of cell levels (``_inflation``)."""
+        copies = self.copies if copies is None else copies
+        stats, factors = [], []
+        for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
+            s = self._stats(i, sim, replicates, self.seed + 101 + i)
+            stats.append(s)
+            factors.append(self._inflation(i, sim.recording, s, copies))
+        return Stats.join(stats), np.concatenate(factors)
+
+    def _inflation(self, i: int, sim: Recording, pooled: Stats, copies: int) -> Array:
+        """Per statistic: 1, except the cell levels of stationary data.  A slow wander moves
+        whole runs, which blocks within a run cannot show; the copies are independent
+        replays, so the spread of a level between copies is its sampling variance under
+        the simulated model; its ratio to the real bootstrap variance, pooled over a
+        condition's levels, scales their variance on both sides (never below 1)."""
+        factor = np.ones(len(pooled.keys))
+        if self.kinds[i] != 'stationary' or copies < 2:
+            return factor
+        code, size, count, cells, cond, real_var, names = self._plan(i, sim, copies)
+        x = sim.readings[:, self.channels]
+        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])],
+                         axis=1).reshape(len(count), copies, x.shape[1])
+        with np.errstate(invalid='ignore', divide='ignore'):
+            means /= count[..., None]
+        spread = np.var(means, axis=1, ddof=1)[cells]
+        ok = np.isfinite(spread)
+        a = np.bincount(cond[ok], spread[ok], minlength=len(names))
+        b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
+        at = [j for j, k in enumerate(pooled.keys) if k.family == 'level']
+        of = [names.get(pooled.keys[j].condition, len(names)) for j in at]
+        factor[at] = np.r_[ratio, 1.0][of]
+        return factor
+
+    def _plan(self, i: int, sim: Recording, copies: int) -> tuple[Any, ...]:
+        """What ``_inflation`` needs of the protocol alone: sample codes of (cell, copy),
+        counts, and the (cell, channel) entries with a real level, their condition and
+        real variance."""
+        if (i, copies) not in self.memory.plans:
+            span = int(self.recordings[i].episode.max()) + 1
+            labels, cell = stationary.cells(sim)
+            code = cell * copies + sim.episode // span
+            count = np.bincount(code, minlength=len(labels) * copies).reshape(len(labels), copies)
+            real = self._real[i]
+            names: dict[str | None, int] = {}
+            entries = []
+            for c, (condition, h) in enumerate(labels):
+                part = None if h is None else f'heading {h:g} deg'
+                for k, sensor in enumerate(self.channels):
+                    j = real.index.get(Key('level', (sensor,), condition, part))
+                    if j is not None:
+                        entries.append((c, k, names.setdefault(condition, len(names)),
+                                        real.variance[j]))
+            e = np.array(entries, np.float64).reshape(-1, 4)
+            self.memory.plans[(i, copies)] = (
+                code, len(labels) * copies, count, (e[:, 0].astype(int), e[:, 1].astype(int)),
+                e[:, 2].astype(int), e[:, 3], names)
+        return self.memory.plans[(i, copies)]
+
+    # -- comparisons ----------------------------------------------------------------------
+
+    def compare(self, effects: Sequence[Effect] = (), replicates: int | None = None) -> Comparison:
+        """Real against simulated-with-``effects``, bootstrap variance on both sides; the
+        rare counts (dropouts) judged by a count test against enough simulated copies."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
         sim, factor = self._simulated(effects, replicates, None)
-        # dropout shares: rare counts, judged by a count model (``gap.rarecount``)
-        return rarecount.compare(self, compare(self.real, sim, factor), effects)
+        c = compare(self.real, sim, factor)
+        if not any(FAMILIES[k.family].counted for k in c.keys):
+            return c
+        real, own = converter.counts(self.real_data), converter.counts(self.simulate(effects))
+        k = converter.count_copies(sum(len(r) for r in self.recordings), self.copies)
+        if k == self.copies or not converter.undecided(real, own):
+            return converter.recount(c, real, own)
+        more = self.simulate(effects, copies=k, remember=False)
+        return converter.recount(c, real, converter.counts(more))
 
-    def objective(self, effects=(), kinds=None, families=None, margin=MARGIN,
-                  limits=False) -> float:
-        """The discrepancy with ``effects`` added, from simulated estimates only, over the
-        recordings of ``kinds`` and the statistics of ``families`` (None: all but those
-        in ``LIMITS_ONLY`` unless ``limits``).  A deterministic function of its arguments
-        and the target (common random numbers), so each value is computed once: a
-        bounded search asks for the same clipped, rounded parameters again."""
-        key = (id(self.real), self.seed, self.config, self.base, self.copies,
-               tuple(self.block_lengths), tuple(self.given) + tuple(effects), kinds,
-               None if families is None else frozenset(families), margin, limits)
-        memo = self._objectives
-        try:
-            return memo[key]
-        except KeyError:
-            pass
-        except TypeError:           # an unhashable parameter: computed every time
-            return self._objective(effects, kinds, families, margin, limits)
-        memo[key] = value = self._objective(effects, kinds, families, margin, limits)
-        return value
+    def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
+                  families: frozenset[str] | None = None, margin: float = MARGIN,
+                  limits: bool = False) -> float:
+        """The discrepancy with ``effects`` added over the recordings of ``kinds`` and the
+        statistics of ``families`` (None: all but the limits-only ones unless ``limits``),
+        simulated estimates only; each value is computed once."""
+        key = (self.seed, self.config, tuple(self.given) + tuple(effects),
+               None if kinds is None else tuple(kinds), families, margin, limits)
+        memo = self.memory.objectives
+        if key not in memo:
+            memo[key] = self._objective(effects, kinds, families, margin, limits)
+        return memo[key]
 
-    def _objective(self, effects, kinds, families, margin, limits) -> float:
-        real = self._real_of(kinds)
-        copies = self._objective_copies()
+    def _objective(self, effects: Sequence[Effect], kinds: Sequence[str] | None,
+                   families: frozenset[str] | None, margin: float, limits: bool) -> float:
+        chosen = self._chosen(kinds)
+        real = Stats.join([self._real[i] for i in chosen])
+        n = sum(len(r) for r in self.recordings)
+        copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
-        ri, si, floor = self._pairs(real, sim, families, limits)
+        only = having('limits')
+        pairs = [(i, sim.index[k]) for i, k in enumerate(real.keys) if k in sim.index and (
+            k.family in families if families is not None else limits or k.family not in only)]
+        if not pairs:
+            return 0.0
+        ri, si = (np.array(p, np.int64) for p in zip(*pairs))
         d = real.estimate[ri] - sim.estimate[si]
-        se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies) + floor)
+        se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies)
+                     + floors([real.keys[i] for i in ri]))
         ok = np.isfinite(d) & np.isfinite(se)
         return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
 
-    def _real_of(self, kinds) -> Stats:
-        """The real statistics of the recordings of ``kinds``, joined once."""
-        cache = self.__dict__.setdefault('_joined', {})
-        if kinds not in cache:
-            cache[kinds] = _join([self._real[i] for i in self._chosen(kinds)])
-        return cache[kinds]
-
-    def _pairs(self, real: Stats, sim: Stats, families, limits: bool) -> tuple:
-        """(real rows, simulated rows, squared floor of the standard error) of the
-        statistics an objective compares; cached while the simulated key list is the
-        one every replay of the protocol shares."""
-        cache = self.__dict__.setdefault('_aligned', {})
-        key = (id(real.keys), id(sim.keys), None if families is None else frozenset(families),
-               limits)
-        hit = cache.get(key)
-        if hit is None or hit[0] is not real.keys or hit[1] is not sim.keys:
-            where = sim.index()
-            pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where
-                     and (k.family in families if families is not None
-                          else limits or k.family not in LIMITS_ONLY)]
-            ri, si = (np.array(p, np.int64) for p in zip(*pairs))
-            floor = squared_floors([real.keys[i] for i in ri])
-            if len(cache) > 32:
-                cache.clear()
-            hit = cache[key] = (real.keys, sim.keys, ri, si, floor)
-        return hit[2:]
-
-    def _objective_copies(self) -> int:
-        """Copies simulated while fitting: one for a long recording (its simulated
-        statistics are then as precise as the real ones, which the objective allows
-        for), else as many as for comparisons."""
-        n = sum(len(r) for r in self.recordings)
-        return 1 if n >= SIM_SAMPLES / 2 else self.copies
-
-    def replicate_discrepancies(self, c: Comparison) -> np.ndarray:
-        """Discrepancy of each bootstrap replicate of the real data against the simulated
-        side of ``c`` (a comparison of this target)."""
-        index = self.real.index()
-        rows = [index[k] for k in c.keys]
+    def replicate_discrepancies(self, c: Comparison) -> Array:
+        """The discrepancy of each bootstrap replicate of the real data against the
+        simulated side of ``c`` (a comparison of this target)."""
+        rows = [self.real.index[k] for k in c.keys]
         with np.errstate(divide='ignore', invalid='ignore'):
             z = (self.real.values[1:, rows] - c.sim[None]) / c.se[None]
         z = np.nan_to_num(z, nan=0.0, posinf=1e3, neginf=-1e3)
-        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+        out: Array = (np.clip(np.abs(z) - MARGIN, 0.0, None) ** 2).sum(axis=1)
+        return out
+
+    def evidence(self, c: Comparison | None) -> 'TargetEvidence':
+        """What a fitter sees (``c``: the comparison with the plain simulator, if any)."""
+        return TargetEvidence(self, c)
 
 
-_REPLAYS: OrderedDict = OrderedDict()
-REPLAY_CACHE = 16
+class TargetEvidence:
+    """``effects.Evidence`` of a target and its comparison with the plain simulator (the
+    given effects in it)."""
 
+    def __init__(self, target: Target, c: Comparison | None):
+        self.target = target
+        self.c = c if c is not None else Comparison([], *(np.zeros(0),) * 4)
 
-def _replay(rec: Recording, config: SimConfig, effects: tuple, seed: int, copies: int,
-            base: str, remember: bool = True) -> Recording:
-    """``replay.replay`` with its dropouts repaired (``dropout.prepared``), remembered: a
-    replay is a deterministic function of the recording, the configuration, the effects,
-    the seed and the copies, and the fitters ask for the same one again (the simulator
-    with the chosen effects and nothing more).  A replay given out is read-only, since
-    it is shared.  ``remember=False`` (a one-off, e.g. many copies for a count): neither
-    looked up nor kept, so the fitters' replays stay."""
-    key = (id(rec), config, effects, seed, copies, base)
-    try:
-        hit = _REPLAYS.get(key) if remember else None
-    except TypeError:           # an unhashable parameter: replay it every time
-        hit, remember = None, False
-    if hit is not None and hit[0] is rec:
-        _REPLAYS.move_to_end(key)
-        return hit[1]
-    raw = replay.replay(rec, config, effects, seed=seed, replicates=copies, base=base)
-    if not remember:
-        return dropout.prepared(raw)
-    raw.readings.flags.writeable = False
-    sim = dropout.prepared(raw)       # repaired once, not again when asked again
-    sim.readings.flags.writeable = False
-    _REPLAYS[key] = (rec, sim)
-    if len(_REPLAYS) > REPLAY_CACHE:
-        _REPLAYS.popitem(last=False)
-    return sim
+    @property
+    def channels(self) -> list[int]:
+        return list(self.target.channels)
 
+    @property
+    def kinds(self) -> frozenset[str]:
+        return frozenset(self.target.kinds)
 
-def _join(parts: list[Stats]) -> Stats:
-    out = parts[0]
-    for p in parts[1:]:
-        out = out + p
-    return out
+    @property
+    def given(self) -> tuple[Effect, ...]:
+        return self.target.given
 
+    @property
+    def observed_base(self) -> bool:
+        return self.target.base == 'observed'
 
-def _block_length(rec: Recording) -> int:
-    if replay.kind(rec) == 'closed_loop':
-        return 0
-    return statistics.block_length(rec, rec.channels_used)
+    @property
+    def samples(self) -> int:
+        return sum(len(r) for r in self.target.recordings)
 
+    def rows(self, family: str) -> list[Row]:
+        if family not in FAMILIES:
+            raise KeyError(f'no statistic family {family!r}')
+        return self.c.rows(family)
 
-def _blocks(rec: Recording, length: int, config: SimConfig,
-            loop_only: bool = False, column_major: bool = False) -> statistics.Blocks:
-    """The block sums of ``rec``; ``loop_only``: no stationary recording beside it
-    (``closed_loop_blocks``); ``column_major``: only the full data's sums are wanted (no
-    replicates), which are added faster down contiguous columns."""
-    if replay.kind(rec) == 'closed_loop':
-        return statistics.closed_loop_blocks(rec, config.task.perturb_every, loop_only)
-    return statistics.stationary_blocks(rec, rec.channels_used, length, column_major)
+    def families(self, part: str | None = None) -> frozenset[str]:
+        present = frozenset(k.family for k in self.target.real.keys)
+        return present if part is None else present & of_part(part)
+
+    def objective(self, effects: Sequence[Effect], kinds: tuple[str, ...] | None = None,
+                  families: frozenset[str] | None = None, limits: bool = False) -> float:
+        return self.target.objective(effects, kinds, families, limits=limits)
+
+    def group_evidence(self, part: str) -> Array:
+        t = self.target
+        real = t.of_kind('stationary')
+        if not real:
+            return evidence.loop_group_evidence(self.c, t.channels, part)
+        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        return evidence.part_evidence(real, sim, len(t.channels), part)
+
+    def group_null(self, part: str) -> Array:
+        t = self.target
+        if not t.of_kind('stationary'):
+            return np.zeros((len(t.channels),) * 2)
+        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        other = [r.recording for r in t.with_seed(t.seed + 104729).simulate(
+            kinds=('stationary',), copies=1)]
+        return evidence.part_evidence(other, sim, len(t.channels), part)
+
+    def own_wander(self) -> dict[int, dict[str, Any]]:
+        t = self.target
+        real = t.of_kind('stationary')
+        if not real:
+            return {}
+        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+
+        def parts(shared_by: tuple[int, ...]) -> tuple[list[tuple[Array, ...]], ...]:
+            mine = []
+            for i, rec in enumerate(real):       # the real recordings' own parts once
+                if (i, shared_by) not in t.memory.own:
+                    t.memory.own[(i, shared_by)] = evidence.own_parts(rec, shared_by)
+                mine.append(t.memory.own[(i, shared_by)])
+            return mine, [evidence.own_parts(rec, shared_by) for rec in sim]
+        return evidence.wandering(parts, t.channels)
+
+    def shared_change(self) -> dict[str, Any] | None:
+        t = self.target
+        real = t.of_kind('stationary')
+        if t.base == 'observed' or not real:
+            return None
+        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        return evidence.shared_change(real, sim, t.channels)
+
+    def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]:
+        return evidence.steady_rows(rows, self.target.of_kind('stationary'), change)
+
+    def spread_cells(self, sensors: Sequence[int],
+                     closed_loop: bool = False) -> list[tuple[float, float]]:
+        level = {(k.sensors, k.condition): v for k, v in zip(self.target.real.keys,
+                                                             self.target.real.estimate)
+                 if k.family == 'closed_loop_level'}
+        return evidence.spread_cells(self.c, level, sensors, closed_loop)
+
+    def converter(self) -> dict[str, Any]:
+        t = self.target
+        rec = t.recordings[0]
+        sim = t.simulate()
+        real_x = np.concatenate([r.readings for r in t.recordings])
+        sim_x = np.concatenate([r.recording.readings for r in sim])
+        bounds = reading_range(rec.manifest, rec.channels)
+        grains = self.rows('granularity') or self.rows('loop_granularity')
+        flagged = {r.key.sensors[0] for r in grains if r.z > 4.0}
+        lattices = {}
+        for sensor in rec.channels_used:
+            x, y = real_x[:, sensor], sim_x[:, sensor]
+            x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+            lattice = converter.grid(x[(x > x.min()) & (x < x.max())])
+            # without granularity statistics: the simulator's readings off the real lattice
+            shown = sensor in flagged if grains else \
+                converter.grid(y[(y > y.min()) & (y < y.max())]) != lattice
+            if lattice[0] > 1 and shown:
+                lattices[sensor] = lattice
+        lost = converter.dropouts(t.real_data, sim)
+        top = max(525.0, *(v for v in bounds if np.isfinite(v)), *(v for v, _ in lost.values()))
+        return {'limits': converter.limits(real_x, sim_x, rec.channels_used, bounds),
+                'lattices': lattices, 'dropouts': lost, 'top': top}
+
+    def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect:
+        t = self.target
+        real = converter.seen_share(t.real_data, sensors)
+        sim = converter.seen_share(t.simulate([effect]), sensors)
+        rate = converter.rescaled_rate(getattr(effect, 'dropout'), real, sim)
+        return dataclasses.replace(effect, dropout=rate)  # type: ignore[type-var]
+
+    def delayed_sensors(self) -> tuple[int, ...]:
+        return closedloop.delayed_sensors(self.target.of_kind('closed_loop'))
+
+    def stationary_runs(self, simulated: bool) -> list[Array]:
+        t = self.target
+        recs = [r.recording for r in t.simulate(kinds=('stationary',))] if simulated \
+            else t.of_kind('stationary')
+        return [rec.readings[r][:, t.channels].astype(np.float64) for rec in recs
+                for r in runs(rec)]

@@ -22,7 +22,7 @@ from ..core import evolution, network
 from ..core.khepera import World
 from ..core.task import step_fitness
 from .simconfig import SimConfig
-from .simulate import EffectEpisodes
+from ..effects.simulate import EffectEpisodes
 
 Reality = Callable[[np.ndarray, np.ndarray], np.ndarray]
 

@@ -6,8 +6,8 @@ swapped into the running episodes and apply from the next step; the task
 (steps, perturbations) from the next episode.  A value the core refuses is
 refused with its reason and the old value stays.
 
-``effects`` adds unmodelled effects (``gap.effects``, as ``khepera-noise
-diagnose`` fits them) to the robots, through ``gap.simulate.EffectEpisodes``;
+``effects`` adds unmodelled effects (``khepera_noise_ros.effects``, as ``khepera-noise
+diagnose`` fits them) to the robots, through ``effects.simulate.EffectEpisodes``;
 with none the episodes are exactly the core's.  A change applies from the next
 episode.
 """
@@ -19,8 +19,8 @@ from typing import Any
 from ..core.noise import (DEFAULT_GROUPS, DISTRIBUTIONS, MODELS, ROUNDINGS, NoiseModel,
                           format_groups)
 from ..core.task import Task
-from ..gap import effects as fx
-from ..gap.simulate import EffectEpisodes
+from .. import effects as fx
+from ..effects.simulate import EffectEpisodes
 from .runtime import spin_node
 from .params import GEOMETRY, SEED_MAX, Spec, noise_from, task_from, world_from
 from .robot_node import RobotNode

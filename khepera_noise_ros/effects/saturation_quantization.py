@@ -1,0 +1,111 @@
+"""``saturation_quantization``: the sensor's converter, one model of its value distribution:
+readings held at a floor or a ceiling, on a lattice coarser than the model's, or lost
+(a reading replaced by a dropout value).
+
+The fit reads the converter's evidence (``Evidence.converter``: the limits the real
+readings pile up at, each sensor's lattice, the dropouts) and lets the simulator choose
+among the combinations that evidence allows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..core.khepera import DARK
+from .base import Array, Effect, Stage, Step, param, rows
+from .evidence import STATIONARY, Candidate, Evidence, names
+
+
+@dataclass(frozen=True)
+class SaturationQuantization(Effect):
+    """``sensors`` rounded to the lattice origin + k * ``step``, held in [low, high]; with
+    probability ``dropout`` a reading is lost and reads ``dropout_value`` instead."""
+
+    name: ClassVar[str] = 'saturation_quantization'
+    stage: ClassVar[Stage] = Stage.READING
+    free: ClassVar[int] = 3
+    summary: ClassVar[str] = ('readings clipped at a floor or ceiling, on a coarser lattice, '
+                              'or dropping out')
+    sensors: tuple[int, ...] = param((), 'sensors of the converter', 'sensors')
+    low: float = param(0.0, 'floor: no reading lies below')
+    high: float = param(DARK, 'ceiling: no reading lies above')
+    step: float = param(1.0, 'lattice step', above=0.0)
+    dropout: float = param(0.0, 'chance that a reading is lost', low=0.0, high=0.999999)
+    dropout_value: float = param(0.0, 'what a lost reading reads')
+    origin: float = param(0.0, 'the lattice is origin + k * step')
+
+    def inconsistency(self) -> str:
+        return 'low must be below high' if self.low >= self.high else ''
+
+    def convert(self, x: Array, rng: np.random.Generator) -> Array:
+        lattice = np.round((x - self.origin) / self.step) * self.step + self.origin
+        out = np.clip(lattice, self.low, self.high)
+        if self.dropout > 0:
+            out = np.where(rng.random(out.shape) < self.dropout, self.dropout_value, out)
+        return out
+
+    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
+        located = rows(self.sensors, channels)
+
+        def step(level: Array) -> Array:
+            out = level.copy()
+            out[located] = self.convert(level[located], rng)
+            return out
+        return step
+
+    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+        located = rows(self.sensors, level.shape[1])
+        out = level.copy()
+        out[:, located] = self.convert(level[:, located], rng)
+        return out
+
+    @classmethod
+    def fit(cls, evidence: Evidence) -> Candidate:
+        found: dict[str, Any] = evidence.converter()
+        low, high = (_strongest(found['limits'], end) for end in (0, 1))
+        grid, lost, top = found['lattices'], found['dropouts'], found['top']
+        if not (low or high or grid or lost):
+            return Candidate(cls.name, None, 'no readings held at a limit, no coarse value '
+                                             'grid and no dropouts')
+        drop: dict[str, float] = {}
+        if lost:
+            values = [v for v, _ in lost.values()]
+            drop = {'dropout': round(float(np.median([r for _, r in lost.values()])), 5),
+                    'dropout_value': max(set(values), key=values.count)}
+        lattices = list(grid.values())
+        step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
+        options = []
+        for use_low in ([False, True] if low else [False]):
+            for use_high in ([False, True] if high else [False]):
+                # with dropouts, a grid is tried without its lattice too: only what is needed
+                for use_grid in ([False, True] if grid and lost else [bool(grid)]):
+                    sensors = (set(grid) if use_grid else set()) | set(lost) | \
+                        (set(low['sensors']) if use_low and low else set()) | \
+                        (set(high['sensors']) if use_high and high else set())
+                    if sensors:
+                        options.append(cls(
+                            tuple(sorted(sensors)),
+                            low=low['value'] if use_low and low else 0.0,
+                            high=high['value'] if use_high and high else top,
+                            step=float(step) if use_grid else 1.0,
+                            origin=float(origin) if use_grid else 0.0, **drop))
+        kinds = (STATIONARY,) if STATIONARY in evidence.kinds else None
+        effect: Effect = min(options, key=lambda e: evidence.objective([e], kinds, limits=True))
+        if lost:
+            effect = evidence.rescaled_dropout(effect, sorted(lost))
+        assert isinstance(effect, cls)
+        what = [w for w, shown in ((f'clipped below at {effect.low:g}', effect.low > 0),
+                                   (f'clipped above at {effect.high:g}', effect.high < top),
+                                   ('on a grid', effect.step > 1),
+                                   (f'dropping out to {effect.dropout_value:g} at rate '
+                                    f'{effect.dropout:.2%}', effect.dropout > 0)) if shown]
+        return Candidate(cls.name, effect, f'{names(effect.sensors)} {" and ".join(what)}')
+
+
+def _strongest(found: list[dict[str, Any]], end: int) -> dict[str, Any] | None:
+    """The limit at ``end`` (0 floor, 1 ceiling) holding the most readings."""
+    mine = [f for f in found if f['end'] == end]
+    return max(mine, key=lambda f: f['share'] * len(f['sensors'])) if mine else None
+

@@ -1,0 +1,71 @@
+"""``sensor_gain_offset``: each sensor's calibration differs from the light model's."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy import stats as sps
+
+from ..core.khepera import DARK
+from .base import Array, Effect, Stage, Step, columns, param, rows
+from .evidence import ALPHA, Candidate, Evidence, holm, names
+
+
+@dataclass(frozen=True)
+class SensorGainOffset(Effect):
+    """reading = anchor - gain * (anchor - ideal) + offset, per sensor."""
+
+    name: ClassVar[str] = 'sensor_gain_offset'
+    stage: ClassVar[Stage] = Stage.LIGHT
+    free: ClassVar[int] = 4
+    summary: ClassVar[str] = 'per-sensor calibration differences in the light response'
+    sensors: tuple[int, ...] = param((), 'sensors whose calibration differs', 'sensors')
+    gains: tuple[float, ...] = param((), 'gain about the anchor, per sensor', 'floats',
+                                     per_sensor=True)
+    offsets: tuple[float, ...] = param((), 'offset in readings, per sensor', 'floats',
+                                       per_sensor=True)
+    anchor: float = param(DARK, 'reading the gain turns about (the dark end)')
+
+    def _arrays(self, channels: int) -> tuple[Array, Array]:
+        located = rows(self.sensors, channels)
+        g, o = np.ones((channels, 1)), np.zeros((channels, 1))
+        g[located, 0], o[located, 0] = self.gains, self.offsets
+        return g, o
+
+    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
+        g, o = self._arrays(channels)
+        return lambda level: self.anchor - g * (self.anchor - level) + o
+
+    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+        columns(self.sensors, level.shape[1])
+        return self.start(level.shape[2], level.shape[1], rng)(level)
+
+    @classmethod
+    def fit(cls, evidence: Evidence) -> Candidate:
+        """Sensors whose levels differ from the light model (chi-square, Holm), each with
+        the line that maps simulated levels onto real ones."""
+        levels = evidence.rows('level')
+        if not levels or evidence.observed_base:
+            return Candidate(cls.name, None, 'no levels from the light model to compare')
+        change = evidence.shared_change()
+        moved = bool(change and change['significant'])
+        if moved and change:          # what a shared change over time leaves is the calibration
+            levels = evidence.steady_rows(levels, change)
+        sensors = sorted({r.key.sensors[0] for r in levels})
+        chi = {s: sum(r.z * r.z for r in levels if r.key.sensors[0] == s) for s in sensors}
+        dof = {s: sum(1 for r in levels if r.key.sensors[0] == s) for s in sensors}
+        p = holm(np.array([sps.chi2.sf(chi[s], dof[s]) for s in sensors]))
+        located = [s for s, q in zip(sensors, p) if q < ALPHA]
+        if not located:
+            return Candidate(cls.name, None, 'no sensor\'s levels differ significantly' + (
+                ' beyond a shared change over time' if moved else ''))
+        gains, offsets = [], []
+        for s in located:
+            real = np.array([r.real for r in levels if r.key.sensors[0] == s])
+            sim = np.array([r.sim for r in levels if r.key.sensors[0] == s])
+            g, a = np.polyfit(sim, real, 1) if np.ptp(sim) > 1 else (1.0, real.mean() - sim.mean())
+            gains.append(round(float(g), 4))
+            offsets.append(round(float(a - DARK * (1 - g)), 2))
+        return Candidate(cls.name, cls(tuple(located), tuple(gains), tuple(offsets), DARK),
+                         f'levels of {names(located)} off the light model')

@@ -1,0 +1,89 @@
+"""``sensor_latency``: readings arrive late by whole steps.
+
+The fit: a step response that lags after a change of heading (stationary recordings),
+else turn responses of the readings moved to a later step (closed loop), the sensors
+and the delay chosen by the simulator among the located sets.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from .base import Array, Effect, Stage, Step, columns, param, rows
+from .evidence import CLOSED_LOOP, STATIONARY, Z_DETECT, Candidate, Evidence, names, present
+
+
+@dataclass(frozen=True)
+class SensorLatency(Effect):
+    """The ``sensors`` report the reading of ``steps`` samples ago (the first repeats)."""
+
+    name: ClassVar[str] = 'sensor_latency'
+    stage: ClassVar[Stage] = Stage.READING
+    free: ClassVar[int] = 1
+    summary: ClassVar[str] = 'readings arrive late, by whole steps'
+    sensors: tuple[int, ...] = param((), 'sensors whose readings arrive late', 'sensors')
+    steps: int = param(1, 'samples each reading arrives late', low=0)
+
+    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
+        located = rows(self.sensors, channels)
+        past: list[Array] = []
+
+        def step(level: Array) -> Array:
+            past.append(level[located].copy())
+            out = level.copy()
+            out[located] = past[max(0, len(past) - 1 - self.steps)]
+            del past[:-self.steps - 1]
+            return out
+        return step
+
+    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+        cols = columns(self.sensors, level.shape[1])
+        out = level.copy()
+        if self.steps <= 0:
+            return out
+        # sample t reads sample max(t - steps, 0): slices, not a gather of every sample
+        out[self.steps:, cols] = level[:max(level.shape[0] - self.steps, 0), cols]
+        out[:self.steps, cols] = level[:1, cols]
+        return out
+
+    @classmethod
+    def fit(cls, evidence: Evidence) -> Candidate:
+        steps = evidence.rows('step_response')
+        first = [r.key.sensors[0] for r in steps
+                 if str(r.key.part).startswith('sample 0') and r.z > Z_DETECT]
+        if first:
+            sensors = tuple(sorted(first))
+            lag: dict[int, float] = {}
+            for r in steps:
+                if r.key.sensors[0] in sensors:
+                    lag[r.key.sensors[0]] = lag.get(r.key.sensors[0], 0.0) + float(
+                        np.clip(r.real, 0, 1))
+            delay = max(1, int(round(np.median(list(lag.values())))))
+            timed = len({r.key.part for r in steps})     # samples the step response covers
+            if delay >= timed:
+                kinds = present(evidence, (STATIONARY,))
+                delay = min(range(timed, timed + 4),
+                            key=lambda d: evidence.objective([cls(sensors, d)], kinds))
+            return Candidate(cls.name, cls(sensors, delay),
+                             f'step response of {names(sensors)} lags {delay} sample(s)')
+        turned = {r.key.sensors[0] for r in evidence.rows('sensor_turn_response')
+                  if abs(r.z) > Z_DETECT}
+        if not turned:
+            return Candidate(cls.name, None, 'readings follow heading changes at once')
+        # sensors whose turn responses pass for simulated can lag too: their closed-loop
+        # noise residuals then take the earlier heading's light; the simulator judges on
+        # the statistics other than the noise ones (other sensor effects act there too)
+        noisy = {r.key.sensors[0] for r in evidence.rows('loop_residual_spread')
+                 if r.z > Z_DETECT}
+        options = {tuple(sorted(turned)), tuple(evidence.channels), tuple(sorted(turned | noisy))}
+        delayed = evidence.delayed_sensors()
+        if delayed:
+            options.add(delayed)
+        families = evidence.families() - evidence.families('closed_loop_noise')
+        kinds = present(evidence, (CLOSED_LOOP,))
+        sensors, delay = min(((o, d) for o in sorted(options) for d in (1, 2, 3)),
+                             key=lambda o: evidence.objective([cls(*o)], kinds, families))
+        return Candidate(cls.name, cls(sensors, delay),
+                         f'turn responses of {names(sensors)} delayed {delay} step(s)')

@@ -1,0 +1,302 @@
+"""The simulator with effects added: closed-loop episodes and stationary runs.
+
+``EffectEpisodes`` is ``core.task.Episodes`` with effects in its sensing and turning;
+with no effects it gives exactly the core's episodes (same streams, same readings).  The
+simulator node runs it for its ``effects`` parameter.  ``stationary`` simulates whole
+runs at fixed light at once, for any number of channels.  Both honour the noise
+model's ``rounding``: with 'reading' the light level is not rounded before the noise;
+reading-stage effects act on the unrounded sum, which is rounded and clipped once.  The
+level is never clipped before the noise: the converter saturates the reading once.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import OrderedDict
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..core.khepera import DARK, SENSORS, TENTHS, World, to_tenths
+from ..core.noise import NoiseModel
+from ..core.streams import UNIT
+from ..core.task import Episodes, Task
+from .base import Array, Effect, Stage, Step
+
+
+def staged(effects: Sequence[Effect], stage: Stage) -> list[Effect]:
+    return [e for e in effects if e.stage is stage]
+
+
+def entropy(seed: Any) -> list[int]:
+    """Seed material for the effects' generator, distinct from the core's streams."""
+    return [int(s) for s in np.atleast_1d(np.asarray(seed, np.int64)).tolist()] + [0x6A9]
+
+
+class EffectEpisodes(Episodes):
+    """Core episodes plus effects, which draw from their own generator seeded by the
+    episodes' seed.  The light stage acts before the model's noise, the reading stage
+    after it; a turn's error is added to the bearing before the core applies the
+    commanded turn, and a turn scale that moves the knocks scales the task's knocks."""
+
+    def __init__(self, world: World = World(), noise: NoiseModel = NoiseModel(),
+                 task: Task = Task(), effects: Sequence[Effect] = ()):
+        self.effects = tuple(effects)
+        self._light: list[Step] = []
+        self._reading: list[Step] = []
+        self._turning: list[Step] = []
+        super().__init__(world, noise, task)
+
+    @property    # type: ignore[override]
+    def task(self) -> Task:
+        """The task, its knocks scaled by the turn effects that move them; setting it sets
+        the unscaled task."""
+        scale = math.prod(getattr(e, 'scale', 1.0) for e in staged(self.effects, Stage.ACTUATOR)
+                          if getattr(e, 'knocks', False))
+        if scale == 1.0:
+            return self._task
+        return dataclasses.replace(self._task, perturbation_deg=float(
+            min(180.0, self._task.perturbation_deg * scale)))
+
+    @task.setter
+    def task(self, task: Task) -> None:
+        self._task = task
+
+    @property    # type: ignore[override]
+    def noise(self) -> 'EffectNoise':
+        return self._noise
+
+    @noise.setter
+    def noise(self, model: Any) -> None:
+        """A new noise model keeps the effects (and their state) of the running episodes."""
+        model = getattr(model, 'model_noise', model)
+        self._noise = EffectNoise(model, self._light, self._reading)
+
+    def reset(self, seed: Any, robots: int | None = None, bearing_deg: Any = None) -> Array:
+        """Start episodes; the effects (``self.effects`` now) start afresh too."""
+        n = robots if robots is not None else int(np.size(seed))
+        # no effects: no generator to build, exactly the core's episodes
+        rng = np.random.default_rng(entropy(seed)) if self.effects else None
+        starts = {stage: [e.start(n, SENSORS, rng) for e in staged(self.effects, stage)]
+                  for stage in Stage} if rng is not None else {stage: [] for stage in Stage}
+        self._light, self._reading = starts[Stage.LIGHT], starts[Stage.READING]
+        self._turning = starts[Stage.ACTUATOR]
+        self.noise = self._noise
+        out: Array = super().reset(seed, robots, bearing_deg)
+        return out
+
+    def step(self, direction: Any, power: Any) -> Array | None:
+        if self._turning and not self.done:
+            commanded = np.asarray(direction, np.float64) * np.asarray(power) \
+                * self.world.deg_per_power
+            actual = commanded
+            for turn in self._turning:
+                actual = turn(actual)
+            self._bearing = (self._bearing + to_tenths(actual - commanded)) % TENTHS
+        out: Array | None = super().step(direction, power)
+        return out
+
+
+class EffectNoise:
+    """The model's noise with light-stage effects before it and reading-stage ones after;
+    every other attribute is the model's (it stands in for a ``NoiseModel``)."""
+
+    def __init__(self, model_noise: NoiseModel, light: list[Step], reading: list[Step]):
+        self.model_noise = model_noise
+        self.light, self.reading = light, reading
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.model_noise, name)
+
+    def apply(self, base: Array, sensor_draws: Array, group_draws: Array,
+              out: Array | None = None) -> Array:
+        if not (self.light or self.reading):
+            result: Array = self.model_noise.apply(base, sensor_draws, group_draws, out=out)
+            return result
+        readings = sense(np.asarray(base, np.float64), self.model_noise, sensor_draws,
+                         group_draws, self.light, self.reading).astype(np.float32)
+        if out is None:
+            return readings
+        out[...] = readings
+        return out
+
+
+def sense(base: Array, noise: NoiseModel, sensor_draws: Array, group_draws: Array,
+          light: list[Step], reading: list[Step]) -> Array:
+    """Light-stage effects, the model's noise on the light level (integer unless the
+    reading is rounded at the end), then the reading stage."""
+    level = base
+    for apply in light:
+        level = apply(level)
+    if rounds_level(noise):
+        # rounded, not clipped: the converter saturates the noisy reading
+        level = np.rint(level).astype(np.float32)
+        out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
+    else:
+        out = noise.added(np.asarray(level, np.float32), sensor_draws,
+                          group_draws).astype(np.float64)
+    for apply in reading:
+        out = apply(out)
+    result: Array = np.clip(np.rint(out), 0.0, DARK)
+    return result
+
+
+def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), seed: int = 0,
+               cache: SimCache | None = None) -> Array:
+    """(samples, channels, units) readings of units whose light is ``base`` (of that
+    shape) at each sample; each unit is one continuous run (effects keep their state).
+
+    The whole run at once: each effect's ``over_time`` acts on every sample, then the
+    model's noise on every sample together.  The model's dependence groups must lie
+    within the channels; effects may name any.  ``cache``: draws and levels remembered
+    across simulations of one protocol (the same numbers)."""
+    cache = cache if cache is not None else SimCache()
+    samples, channels, robots = base.shape
+    rng = cache.generator(entropy(seed))
+    rounded = rounds_level(noise)
+    light = staged(effects, Stage.LIGHT)
+    if light:
+        level = np.asarray(base, np.float64)
+        for e in light:
+            level = e.over_time(level, rng)  # type: ignore[arg-type]
+        flat = levels(level, rounded)
+    else:
+        flat = cache.levels(base, rounded)
+    groups = max(1, len(noise.groups))
+    d = cache.model_draws(int(seed), samples, channels + groups, robots)
+    kernel = noise.apply if rounded else noise.added
+    out = kernel(flat, d[:channels], d[channels:]).astype(np.float64)
+    out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
+    for e in staged(effects, Stage.READING):
+        out = e.over_time(out, rng)  # type: ignore[arg-type]
+    out = np.rint(out)                    # a new array: clipped in place
+    result: Array = np.clip(out, 0.0, DARK, out=out)
+    return result
+
+
+def rounds_level(noise: Any) -> bool:
+    return getattr(noise, 'rounding', 'level') == 'level'
+
+
+def levels(level: Array, rounded: bool = True) -> Array:
+    """(channels, samples x units) float32 light levels the model's noise acts on: rounded
+    unless the reading is rounded at the end, never clipped (a light-stage effect can
+    take the light beyond what the converter reads; the converter saturates once)."""
+    if rounded:
+        level = np.rint(level)
+    flat = level.astype(np.float32)
+    out: Array = np.ascontiguousarray(flat.transpose(1, 0, 2)).reshape(flat.shape[1], -1)
+    return out
+
+
+class SimCache:
+    """What stationary simulations of one protocol share, remembered by whoever repeats
+    them (a diagnosis holds one): the model's noise draws per seed and shape (they do not
+    depend on the effects), the effects' draws per seed and sequence of calls (a fit asks
+    for the same arrays with other parameters: drawing a normal costs ten times copying
+    it), and the light levels of a read-only base.  Arrays handed out are read-only or
+    copies; at most ``max_bytes`` of effect draws are kept, the oldest going first."""
+
+    def __init__(self, max_bytes: int = 96 << 20):
+        self.max_bytes = max_bytes
+        self.kept: OrderedDict[tuple[Any, ...], tuple[Array, dict[str, Any]]] = OrderedDict()
+        self.size = 0
+        self._model: dict[tuple[int, ...], Array] = {}
+        self._levels: list[tuple[Array, bool, Array]] = []
+
+    def generator(self, seed_material: list[int]) -> Remembered:
+        return Remembered(seed_material, self)
+
+    def model_draws(self, seed: int, samples: int, rows: int, robots: int) -> Array:
+        """The model's noise draws, (rows, samples x robots) read-only."""
+        key = (seed, samples, rows, robots)
+        if key not in self._model:
+            draws = np.random.default_rng([seed, 0x5A7]).integers(
+                0, int(UNIT) + 1, size=(samples, rows, robots), dtype=np.uint16)
+            out = np.ascontiguousarray(draws.transpose(1, 0, 2)).reshape(rows, -1)
+            out.flags.writeable = False
+            if len(self._model) >= 8:
+                self._model.pop(next(iter(self._model)))
+            self._model[key] = out
+        return self._model[key]
+
+    def levels(self, base: Array, rounded: bool) -> Array:
+        """``levels`` of ``base``, made once where ``base`` is read-only (a replay's light)."""
+        if base.flags.writeable:
+            return levels(np.asarray(base, np.float64), rounded)
+        for known, how, flat in self._levels:
+            if known is base and how == rounded:
+                return flat
+        flat = levels(np.asarray(base, np.float64), rounded)
+        flat.flags.writeable = False
+        self._levels = self._levels[-7:] + [(base, rounded, flat)]
+        return flat
+
+    def keep(self, key: tuple[Any, ...], value: Array, state: dict[str, Any]) -> None:
+        kept = np.array(value)
+        kept.flags.writeable = False
+        if kept.nbytes > self.max_bytes:
+            return
+        old = self.kept.pop(key, None)
+        if old is not None:
+            self.size -= old[0].nbytes
+        self.kept[key] = (kept, state)
+        self.size += kept.nbytes
+        while self.size > self.max_bytes:
+            _, (dropped, _) = self.kept.popitem(last=False)
+            self.size -= dropped.nbytes
+
+
+class Remembered:
+    """``np.random.default_rng(seed_material)`` whose ``standard_normal(size)`` and
+    ``random(size)`` draws are remembered in a ``SimCache``: the n-th draw after the same
+    n - 1 calls is the same array.  Any other use gets the generator itself, at the same
+    point of its stream."""
+
+    def __init__(self, seed_material: list[int], cache: SimCache):
+        self._seed = tuple(int(e) for e in seed_material)
+        self._cache = cache
+        self._calls: tuple[Any, ...] | None = ()
+        self._state: dict[str, Any] | None = None   # the bit generator's state after them
+        self._rng: np.random.Generator | None = None
+
+    def standard_normal(self, size: Any = None, **kwargs: Any) -> Any:
+        return self._draw('standard_normal', size, kwargs)
+
+    def random(self, size: Any = None, **kwargs: Any) -> Any:
+        return self._draw('random', size, kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith('_'):
+            raise AttributeError(name)
+        rng = self._generator()
+        self._calls = None              # the stream is no longer known by its calls
+        return getattr(rng, name)
+
+    def _generator(self) -> np.random.Generator:
+        if self._rng is None:
+            if self._state is None:
+                self._rng = np.random.default_rng(list(self._seed))
+            else:
+                bits = np.random.PCG64()
+                bits.state = self._state
+                self._rng = np.random.Generator(bits)
+        return self._rng
+
+    def _draw(self, method: str, size: Any, kwargs: dict[str, Any]) -> Any:
+        if kwargs or size is None or self._calls is None:
+            self._calls = None
+            return getattr(self._generator(), method)(size, **kwargs)
+        shape = tuple(int(s) for s in np.atleast_1d(size))
+        calls = self._calls + ((method, shape),)
+        key = (self._seed, calls)
+        if self._rng is None:
+            hit = self._cache.kept.get(key)
+            if hit is not None:
+                self._cache.kept.move_to_end(key)
+                self._calls, self._state = calls, hit[1]
+                return hit[0].copy()
+        value = getattr(self._generator(), method)(size)
+        self._calls = calls
+        self._cache.keep(key, value, self._generator().bit_generator.state)
+        return value

@@ -1,0 +1,185 @@
+"""Real against simulated statistics: standardised differences, their significance, and the
+discrepancy an effect has to shrink.
+
+Each statistic's difference is divided by its standard error, the root of the sum of
+the two bootstrap variances (floored by its family's least error), to give z.
+Significance is Holm's step-down correction over every statistic compared.  The
+*discrepancy* is  sum over statistics of max(|z| - 2, 0)^2: each statistic counts by how
+far it lies beyond two standard errors, so the many that agree add (almost) nothing.
+"""
+from __future__ import annotations
+
+import functools
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from scipy import stats as sps
+
+from ..effects.base import Array
+from ..effects.evidence import Key, Row, holm
+from .families import FAMILIES, PARTS
+
+ALPHA = 0.01
+MARGIN = 2.0
+Z_CAP = 1e3
+# Discrepancy of one statistic with no gap, z ~ N(0, 1): the mean and variance of
+# max(|z| - 2, 0)^2; what is left of a part is worked on only above mean + 3 sd.
+CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
+
+
+@dataclass
+class Stats:
+    """Values of many statistics: ``values`` is (R, K), row 0 the full-data estimate."""
+
+    keys: list[Key]
+    values: Array
+
+    @property
+    def estimate(self) -> Array:
+        return self.values[0]
+
+    @functools.cached_property
+    def variance(self) -> Array:
+        """Bootstrap variance of each statistic (0 without replicates)."""
+        if self.values.shape[0] < 3:
+            return np.zeros(len(self.keys))
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)     # all-NaN columns give NaN
+            var: Array = np.nanvar(self.values[1:], axis=0, ddof=1)
+        return var
+
+    @functools.cached_property
+    def index(self) -> dict[Key, int]:
+        return {k: i for i, k in enumerate(self.keys)}
+
+    @staticmethod
+    def join(parts: Sequence['Stats']) -> 'Stats':
+        rows = min(p.values.shape[0] for p in parts)
+        return Stats([k for p in parts for k in p.keys],
+                     np.concatenate([p.values[:rows] for p in parts], axis=1))
+
+
+@dataclass
+class Comparison:
+    keys: list[Key]
+    real: Array
+    sim: Array
+    se: Array
+    z: Array
+    _families: dict[str, list[Row]] | None = field(default=None, repr=False)
+
+    @property
+    def p_holm(self) -> Array:
+        out: Array = holm(2.0 * sps.norm.sf(np.abs(self.z)))
+        return out
+
+    def significant(self, alpha: float = ALPHA) -> Array:
+        out: Array = self.p_holm < alpha
+        return out
+
+    @property
+    def discrepancy(self) -> float:
+        return discrepancy(self.z)
+
+    def select(self, mask: Any) -> 'Comparison':
+        keep = np.flatnonzero(mask)
+        return Comparison([self.keys[i] for i in keep], self.real[keep], self.sim[keep],
+                          self.se[keep], self.z[keep])
+
+    def rows(self, family: str) -> list[Row]:
+        """The statistics of ``family`` (the comparison is split by family once)."""
+        if self._families is None:
+            self._families = {}
+            for row in zip(self.keys, self.real, self.sim, self.se, self.z):
+                self._families.setdefault(row[0].family, []).append(Row(*row))
+        return list(self._families.get(family, ()))
+
+    @functools.cached_property
+    def parts(self) -> Array:
+        """Each statistic's part (``families.PARTS``)."""
+        return np.array([FAMILIES[k.family].part for k in self.keys], dtype=object)
+
+    def part(self, name: str) -> 'Comparison':
+        return self.select(self.parts == name)
+
+    def split(self) -> dict[str, 'Comparison']:
+        """Each part's statistics (parts with none left out)."""
+        return {p: self.part(p) for p in PARTS if (self.parts == p).any()}
+
+    def of(self, wanted: Callable[[str], bool]) -> 'Comparison':
+        """The statistics whose family is ``wanted``."""
+        return self.select([wanted(k.family) for k in self.keys])
+
+
+def discrepancy(z: Array, margin: float = MARGIN) -> float:
+    """sum of max(|z| - margin, 0)^2; margin 0 gives the plain sum of squares."""
+    return float((np.clip(np.abs(z) - margin, 0.0, None) ** 2).sum())
+
+
+def chance(n: int) -> float:
+    """The discrepancy ``n`` statistics reach by chance with no gap left (mean + 3 sd)."""
+    return float(n * CHANCE_MEAN + CHANCE_SDS * np.sqrt(n * CHANCE_VAR))
+
+
+def paired_p(before: Array, after: Array, d_prev: float, d_new: float) -> float:
+    """One-sided p that ``after`` does not lower the discrepancy: the paired replicate
+    differences centred on the estimate's difference."""
+    diff = before - after
+    diff = diff + (d_prev - d_new) - np.median(diff)
+    return float((np.sum(diff <= 0) + 1) / (diff.size + 1))
+
+
+def floors(keys: Sequence[Key]) -> Array:
+    """The squared least standard error of each statistic (its family's floor)."""
+    return np.array([FAMILIES[k.family].floor for k in keys]) ** 2
+
+
+def compare(real: Stats, sim: Stats, inflation: Array | None = None) -> Comparison:
+    """The statistics both share, their differences standardised; ``inflation`` (aligned
+    with ``sim.keys``) scales both variances where the bootstrap understates them."""
+    where = sim.index
+    pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where]
+    ri = np.array([p[0] for p in pairs], np.int64)
+    si = np.array([p[1] for p in pairs], np.int64)
+    r, s = real.estimate[ri], sim.estimate[si]
+    scale = 1.0 if inflation is None else inflation[si]
+    keys = [real.keys[i] for i in ri]
+    se = np.sqrt((real.variance[ri] + sim.variance[si]) * scale + floors(keys))
+    ok = np.flatnonzero(np.isfinite(r) & np.isfinite(s) & np.isfinite(se))
+    z = np.clip((r[ok] - s[ok]) / se[ok], -Z_CAP, Z_CAP)
+    return Comparison([keys[i] for i in ok], r[ok], s[ok], se[ok], z)
+
+
+def entries(c: Comparison, limit: int = 40, alpha: float = ALPHA) -> list[dict[str, Any]]:
+    """The ``where`` list of diagnosis.json: largest |z| first."""
+    order = np.argsort(-np.abs(c.z), kind='stable')[:limit]
+    p = c.p_holm
+    return [{'statistic': c.keys[i].family, 'sensors': list(c.keys[i].sensors),
+             'condition': c.keys[i].condition, 'part': c.keys[i].part,
+             'sim': float(c.sim[i]), 'real': float(c.real[i]),
+             'significance': float(abs(c.z[i])), 'p_value': float(p[i]),
+             'significant': bool(p[i] < alpha)} for i in order]
+
+
+def localise(c: Comparison, alpha: float = ALPHA) -> dict[str, dict[str, float]]:
+    """Which families, sensors, pairs, conditions and parts carry the significant
+    discrepancy, each with its share."""
+    weight = np.clip(np.abs(c.z) - MARGIN, 0.0, None) ** 2 * c.significant(alpha)
+    total = weight.sum()
+    out: dict[str, dict[str, float]] = {k: {} for k in ('families', 'sensors', 'pairs',
+                                                        'conditions', 'parts')}
+    if total <= 0:
+        return out
+    for key, w in zip(c.keys, weight / total):
+        if w <= 0:
+            continue
+        shares = [('families', key.family, w), ('conditions', key.condition or 'all', w),
+                  ('parts', key.part or 'all', w)]
+        if len(key.sensors) == 2:
+            shares.append(('pairs', '-'.join(f's{s}' for s in key.sensors), w))
+        shares += [('sensors', f's{s}', w / len(key.sensors)) for s in key.sensors]
+        for table, name, value in shares:
+            out[table][name] = out[table].get(name, 0.0) + float(value)
+    return {k: dict(sorted(v.items(), key=lambda kv: -kv[1])) for k, v in out.items()}

@@ -1,0 +1,566 @@
+"""The sensor's converter seen in each sensor's value distribution: dropouts, piles at a
+limit, the value lattice; their statistics and the evidence ``saturation_quantization``
+is fitted to.
+
+*Dropouts* are isolated readings at a sensor's lowest or highest value lying far from
+their local level (the median of the two readings before and after in the episode): by
+``AWAY`` readings, ``STEADY`` times the neighbours' range and ``SPREADS`` robust sds of
+the episode's deviations.  A value holding readings for stretches in a moving light is a
+limit, not a dropout value; a value standing apart from every other reading
+(``_detached``) is beyond the noise however wide it is.  They are repaired (read as a
+neighbour's level) before any other statistic, and compared as shares (``dropout``,
+``closed_loop_dropout``) by an exact count test (``recount``).  A *pile* is the share
+of readings within ``WIDTH`` of the most common value among the outermost ``TAIL`` of a
+sensor's readings (``pileup``); a *limit* is a value the real readings pile up at where
+the simulator puts readings beyond it (``limits``).  The *lattice*: the share of
+readings at each cell's most common value (``mode_share``) and on each sensor's most
+common residue modulo small steps (``granularity``, ``loop_granularity`` in closed loop).
+"""
+from __future__ import annotations
+
+import copy
+import warnings
+from collections import Counter
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import stats as sps
+
+from ..effects.base import Array
+from ..effects.evidence import Key
+from . import bootstrap
+from .compare import Z_CAP, Comparison
+from .families import having
+
+ENDS = ('to the lowest reading', 'to the highest reading')
+PILE_ENDS = ('at the lowest reading', 'at the highest reading')
+MODULI = (2, 3, 4, 5, 8, 10)     # lattice steps the granularity statistics test
+AWAY, SPREADS, STEADY = 10.0, 6.0, 2.0
+NEAR = (-2, -1, 1, 2)            # the neighbours whose median is the local level
+WINDOW = tuple(k for k in range(-8, 9) if k)   # a quick robust sd first (cheaper) ...
+QUICK = 0.75                     # ... rules out, with a margin, what the run's sd would
+ISOLATED = 3                     # of the four neighbours, at most one at the same extreme
+STRETCHED = 0.25                 # readings at a value next to each other this often: a limit
+DETACHED_HITS, DETACHED, SPACINGS = 3, 3.0, 10
+TAIL, WIDTH = 0.02, 1.0          # where a pile is looked for, and how wide it is
+# a limit at v: the simulator puts EXPECTED readings beyond v, the real readings at v are
+# HELD of those the simulator puts at or beyond, exceed its count at v by MIN_SHARE of the
+# readings and Z Poisson sds, and exceed the next real value inward
+EXPECTED, HELD, MIN_SHARE, Z = 5.0, 0.5, 0.002, 3.0
+MIN_HITS, DROP_Z, MAX_RATE = 3, 4.0, 0.5
+MIN_VALUES = 12                  # values inside its range a sensor needs in closed loop
+COUNT_SAMPLES, MAX_COPIES, KNOWN, EVENTS = 48_000, 20, 20, 2
+
+
+# -- dropouts ------------------------------------------------------------------------------
+
+def repair(x: Array, runs: list[np.ndarray], moving: bool = False) -> tuple[Array, Array, Array]:
+    """(``x`` with each dropout read as a neighbour's level, (N, C, 2) marks at the lowest
+    and highest value, (C, 2) each channel's extremes); ``runs``: sample indices of each
+    run in step order; ``moving``: the light moves within a run (closed loop)."""
+    marks = np.zeros(x.shape + (2,), np.float32)
+    ends = _extremes(x)
+    kept = [r for r in runs if r.size >= 3]
+    if not kept or x.size == 0:
+        return x, marks, ends
+    order = np.concatenate(kept)
+    sizes = np.array([r.size for r in kept])
+    first = np.cumsum(np.r_[0, sizes[:-1]])
+    run_of = np.repeat(np.arange(len(kept)), sizes)
+    place = np.full(x.shape[0], -1)
+    place[order] = np.arange(order.size)
+    xo = x[order].astype(np.float64)
+    geometry = (run_of, first, sizes)
+    todo = []                                      # (channel, end, positions at the extreme)
+    for k in range(x.shape[1]):
+        for end in (0, 1):
+            i = np.sort(place[np.flatnonzero(x[:, k] == ends[k, end])])
+            i = i[i >= 0]
+            if i.size and not (moving and _stretched(i, run_of)):
+                i = i[~_flanked(i, run_of)]
+                if i.size:
+                    todo.append((k, end, i))
+    if not todo:
+        return x, marks, ends
+    # the local tests for every channel at once; only what is left needs its run's scale
+    at = np.concatenate([i for *_, i in todo])
+    channel = np.concatenate([np.full(i.size, k) for k, _, i in todo])
+    cuts = np.cumsum([i.size for *_, i in todo])[:-1]
+    repaired, deviations = x, {}
+    for (k, end, i), far, lower, d, alone in zip(todo, *(np.split(v, cuts) for v in _local(
+            xo, at, channel, geometry))):
+        if (alone & ~far).any() and _detached(x[:, k], end):
+            far = alone           # beyond the noise's reach: isolated and away suffices
+        elif far.any():
+            if k not in deviations:
+                dev = np.abs(xo[:, k] - _median4(xo[:, k], _neighbours(geometry, NEAR)))
+                deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
+            scale = _scales(deviations[k], geometry, np.unique(run_of[i[far]]))
+            far[far] = d[far] >= SPREADS * scale[run_of[i[far]]]
+        if far.any():
+            if repaired is x:
+                repaired = x.copy()
+            marks[order[i[far]], k, end] = 1.0
+            repaired[order[i[far]], k] = lower[far]
+    return repaired, marks, ends
+
+
+def _extremes(x: Array) -> Array:
+    """(C, 2) each channel's least and greatest finite value (NaN where it has none)."""
+    if not np.isnan(x).any():
+        return np.stack([x.min(axis=0), x.max(axis=0)], axis=1)
+    with np.errstate(invalid='ignore'), warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)         # a channel all NaN
+        return np.stack([np.nanmin(x, axis=0), np.nanmax(x, axis=0)], axis=1)
+
+
+def _local(xo: Array, i: np.ndarray, k: np.ndarray,
+           geometry: tuple[np.ndarray, ...]) -> tuple[Array, ...]:
+    """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
+    readings at positions ``i`` of channels ``k``: far from the median of their neighbours
+    (those at the same value left out), then from a quick robust sd of the ``WINDOW``."""
+    value = xo[i, k]
+    around = xo[_neighbours(geometry, NEAR, i), k]
+    around = np.where(around == value[None, :], np.nan, around)
+    count = np.isfinite(around).sum(axis=0)
+    kept = np.sort(around, axis=0)                              # NaN sorts last
+    cols = np.arange(i.size)
+    lower = kept[np.maximum(count - 1, 0) // 2, cols]
+    level = 0.5 * (lower + kept[np.minimum(count // 2, 3), cols])
+    d = np.abs(value - level)
+    with warnings.catch_warnings(), np.errstate(invalid='ignore'):
+        warnings.simplefilter('ignore', RuntimeWarning)        # none left: not isolated
+        rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
+        alone = (count >= ISOLATED) & (d >= AWAY)
+        far = alone & (d >= STEADY * rough)
+    if far.any():
+        near = xo[_neighbours(geometry, WINDOW, i[far]), k[far]]
+        spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
+        far[far] = d[far] >= QUICK * SPREADS * spread
+    return far, lower, d, alone
+
+
+def _neighbours(geometry: tuple[np.ndarray, ...], offsets: tuple[int, ...],
+                at: np.ndarray | None = None) -> np.ndarray:
+    """(len(offsets), N) positions of each position's neighbours in its run (reflected)."""
+    run_of, first, sizes = geometry
+    at = np.arange(run_of.size) if at is None else at
+    start, n = first[run_of[at]], sizes[run_of[at]]
+    j = (at - start)[None, :] + np.array(offsets)[:, None]
+    j = np.where(j < 0, -j, j)
+    j = np.where(j >= n, 2 * (n - 1) - j, j)
+    out: np.ndarray = start + np.clip(j, 0, n - 1)
+    return out
+
+
+def _median4(col: Array, neighbours: np.ndarray) -> Array:
+    """The median of four neighbours (their sum less the extremes, halved)."""
+    v = col[neighbours]
+    out: Array = 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0))
+    return out
+
+
+def _scales(deviations: Array, geometry: tuple[np.ndarray, ...], wanted: np.ndarray) -> Array:
+    """Per run (the ``wanted`` ones; others inf): 1.4826 x the median deviation of its
+    readings from their local levels."""
+    run_of, first, sizes = geometry
+    out = np.full(sizes.size, np.inf)
+    for r in wanted:
+        out[r] = 1.4826 * np.median(deviations[first[r]:first[r] + sizes[r]])
+    return out
+
+
+def _adjacent(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+    return (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+
+
+def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
+    """More than ``STRETCHED`` of the readings at a value lie next to another one: the
+    light holds the sensor there (a limit); dropouts at rate p do so about 2p of the time."""
+    pair = _adjacent(i, run_of)
+    beside = np.zeros(i.size, bool)
+    beside[1:] |= pair
+    beside[:-1] |= pair
+    return bool(beside.sum() > STRETCHED * i.size)
+
+
+def _flanked(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+    """Readings whose two neighbours in the run are at the value too: never isolated."""
+    pair = _adjacent(i, run_of)
+    both = np.zeros(i.size, bool)
+    both[1:-1] = pair[:-1] & pair[1:]
+    return both
+
+
+def _detached(col: Array, end: int) -> bool:
+    """Does the extreme value stand apart: ``DETACHED_HITS`` readings at it, and a gap to
+    the next value inward of ``AWAY`` readings and ``DETACHED`` times the widest gap
+    between the next ``SPACINGS`` distinct values (a noise tail thins out value by value,
+    a lattice's gaps are alike)?"""
+    x = col[np.isfinite(col)]
+    x = x if end == 0 else -x
+    low = x.min()
+    whole = np.all(x == np.round(x)) and x.max() - low < 1e5
+    counts = np.bincount((x - low).astype(np.int64)) if whole else None
+    rest = int(x.size - counts[0]) if counts is not None else int(np.count_nonzero(x > low))
+    m = min(rest, 64 * (SPACINGS + 1))           # the distinct values among the nearest m
+    at_low = counts[0] if counts is not None else np.count_nonzero(x == low)
+    if at_low < DETACHED_HITS or m < SPACINGS + 1:
+        return False
+    if counts is not None:        # whole readings: the same values from their counts
+        values = np.flatnonzero(counts)[1:]
+        inside = np.cumsum(counts[values]) - counts[values] < m
+        near = (values[inside][:SPACINGS + 1] + low).astype(np.float64)
+    else:
+        near = np.unique(np.partition(x[x > low], m - 1)[:m])[:SPACINGS + 1]
+    if near.size < 3:
+        return False
+    gap = near[0] - low
+    return bool(gap >= AWAY and gap >= DETACHED * np.diff(near).max())
+
+
+# -- piles and the lattice -------------------------------------------------------------
+
+def piles(x: Array) -> tuple[float | None, float | None]:
+    """(low, high): the most common value among the outermost ``TAIL`` of finite ``x`` at
+    each end (the outermost of equals)."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return None, None
+    values, counts = np.unique(x, return_counts=True)
+    k = max(1, int(np.ceil(TAIL * x.size)))
+    if not np.all(x == np.round(x)):          # not whole values: the outermost k readings
+        if 2 * k >= x.size:
+            return float(values[np.argmax(counts)]), float(values[::-1][np.argmax(counts[::-1])])
+        part = np.partition(x, (k - 1, x.size - k))
+        (lows, nl), (highs, nh) = (np.unique(p, return_counts=True)
+                                   for p in (part[:k], part[x.size - k:]))
+        return float(lows[np.argmax(nl)]), float(highs[::-1][np.argmax(nh[::-1])])
+    return _piles_of(values, counts)          # whole values: those up to the tail's share
+
+
+def edge_hits(x: Array) -> Array:
+    """(N, C, 2): 1 where a sample lies within ``WIDTH`` of its channel's pile values."""
+    out = np.zeros(x.shape + (2,))
+    for k in range(x.shape[1]):
+        for end, value in enumerate(piles(x[:, k])):
+            if value is not None:
+                out[:, k, end] = np.abs(x[:, k] - value) <= WIDTH
+    return out
+
+
+def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
+                    total: Any) -> dict[str, Array]:
+    """Sums by ``total``'s groups (``stationary.Grouping`` of the samples ``order`` keeps)
+    of the converter's stationary statistics."""
+    o, c = order, x.shape[1]
+    low = np.nanmin(x) if np.isfinite(x).any() else 0.0
+    if not (np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5):
+        return {'edge': total(edge_hits(x)[o]), 'dropped': total(marks[o])}
+    # whole readings: everything from histograms of values (cell by channel)
+    xi = (x - low).astype(np.int64)
+    span, cells = int(xi.max()) + 1, int(cell.max()) + 1
+    channel = np.arange(c)[None, :]
+    per_cell = np.bincount(((cell[:, None] * c + channel) * span + xi).ravel(),
+                           minlength=cells * c * span).reshape(cells, c, span)
+    hist = per_cell.sum(axis=0)                                        # (C, span)
+    values = np.arange(span) + low
+    table = np.zeros((span, c, 2 + len(MODULI)), np.float32)           # per value: ends, lattice
+    for k in range(c):
+        seen = hist[k] > 0
+        for end, pile in enumerate(_piles_of(values[seen], hist[k][seen])):
+            table[:, k, end] = np.abs(values - pile) <= WIDTH
+    for j, q in enumerate(MODULI):
+        residue = np.mod(values, q).astype(np.int64)
+        modal = (hist @ (residue[:, None] == np.arange(q)[None, :])).argmax(axis=1)   # (C,)
+        table[:, :, 2 + j] = residue[:, None] == modal[None, :]
+    xo = xi[o]
+    mode = per_cell.argmax(axis=2)                                     # (cells, C)
+    flags = table.reshape(span * c, -1)[(xo * c + channel).ravel()].reshape(len(o), -1)
+    sums = total(flags).reshape(-1, c, 2 + len(MODULI))
+    return {'edge': sums[:, :, :2], 'dropped': total(marks[o]),
+            'at_mode': total((xo == mode[cell[o]]).astype(np.float32)), 'residue': sums[:, :, 2:]}
+
+
+def _piles_of(values: Array, counts: np.ndarray) -> tuple[float, float]:
+    """``piles`` of whole readings given as distinct values and their counts."""
+    cum = np.cumsum(counts)
+    tail = max(1, int(np.searchsorted(cum, TAIL * cum[-1])) + 1)
+    return (float(values[np.argmax(counts[:tail])]),
+            float(values[values.size - 1 - np.argmax(counts[::-1][:tail])]))
+
+
+def stationary_stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
+    n = b.part(s, 'n')[..., 0]
+    total = n.sum(axis=1)[:, None]
+    ch = b.channels
+    keys = [Key('pileup', (k,), None, end) for k in ch for end in PILE_ENDS]
+    cols = [(b.part(s, 'edge').sum(axis=1) / total[..., None]).reshape(s.shape[0], -1)]
+    more_keys, more_cols = _shares('dropout', ch, None, b.part(s, 'dropped').sum(axis=1)
+                                   / total[..., None])
+    keys, cols = keys + more_keys, cols + more_cols
+    if b.has('at_mode'):
+        for cond in dict.fromkeys(c for c, _ in b.strata):
+            m = [i for i, lab in enumerate(b.strata) if lab[0] == cond]
+            keys += [Key('mode_share', (k,), cond, None) for k in ch]
+            cols.append(b.part(s, 'at_mode')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None])
+        keys += [Key('granularity', (k,), None, f'step {q}') for k in ch for q in MODULI]
+        cols.append((b.part(s, 'residue').sum(axis=1) / total[..., None]).reshape(s.shape[0], -1))
+    return keys, cols
+
+
+def _shares(family: str, channels: Sequence[int], condition: str | None,
+            share: Array) -> tuple[list[Key], list[Array]]:
+    """Dropout shares (R, C, 2) per sensor and end, and pooled over the sensors (a small
+    rate shared by many sensors shows there)."""
+    keys, cols = [], []
+    for j, end in enumerate(ENDS):
+        for k, sensor in enumerate(channels):
+            keys.append(Key(family, (sensor,), condition, end))
+            cols.append(share[:, k, j])
+        if len(channels) > 1:
+            keys.append(Key(family, tuple(channels), condition, end))
+            cols.append(share[:, :, j].mean(axis=1))
+    return keys, [np.stack(cols, axis=1)] if cols else []
+
+
+def loop_sums(x: Array, marks: Array, ep: np.ndarray, episodes: int,
+              values: bool) -> dict[str, Array]:
+    """Per-episode sums of the closed-loop converter statistics; ``values``: the lattice
+    too (a diagnosis with no stationary recording)."""
+    def by(v: Array) -> Array:
+        out = np.zeros((episodes,) + v.shape[1:])
+        np.add.at(out, ep, v)
+        return out
+    out = {'dropped': by(marks[:, :8])}
+    r = x[:, :8]
+    if values and np.isfinite(r).all() and np.all(r == np.round(r)):
+        weight, on = _on_lattice(r)
+        out['lv_weight'], out['lv_residue'] = by(weight), by(on * weight[..., None])
+    return out
+
+
+def _on_lattice(r: Array) -> tuple[Array, Array]:
+    """((N, C) each reading's weight: 1 over the readings at its value, 0 at the sensor's
+    least and greatest; (N, C, Q) on the sensor's most common residue): each value seen
+    counts once, however often (a reading held at one value makes no lattice)."""
+    weight, on = np.zeros(r.shape), np.zeros(r.shape + (len(MODULI),))
+    for k in range(r.shape[1]):
+        values, index, counts = np.unique(r[:, k], return_inverse=True, return_counts=True)
+        inner = (values > r[:, k].min()) & (values < r[:, k].max())
+        weight[:, k] = np.where(inner, 1.0 / counts, 0.0)[index.ravel()]
+        for j, q in enumerate(MODULI):
+            residue = np.mod(values, q).astype(np.int64)
+            modal = np.bincount(residue[inner], minlength=q).argmax()
+            on[:, k, j] = (residue == modal)[index.ravel()]
+    return weight, on
+
+
+def loop_stats(b: bootstrap.Blocks, s: Array, i: int,
+               condition: str) -> tuple[list[Key], list[Array]]:
+    """Stratum ``i``'s (one condition's) closed-loop converter statistics."""
+    n = b.part(s, 'n')[:, i, 0]
+    keys, cols = _shares('closed_loop_dropout', tuple(range(8)), condition,
+                         b.part(s, 'dropped')[:, i] / n[:, None, None])
+    if b.has('lv_weight'):
+        weight = b.part(s, 'lv_weight')[:, i]
+        share = b.part(s, 'lv_residue')[:, i] / weight[..., None]
+        for k in range(8):
+            if weight[0, k] >= MIN_VALUES:
+                keys += [Key('loop_granularity', (k,), condition, f'step {q}') for q in MODULI]
+                cols.append(share[:, k])
+    return keys, cols
+
+
+# -- rare counts -----------------------------------------------------------------------
+
+def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
+    """{Key: [count, readings]} of the dropout statistics of repaired recordings (each with
+    ``marks``, ``kind``, ``recording``), summed over recordings with equal keys."""
+    out: dict[Key, list[float]] = {}
+    for r in recordings:
+        rec, marks = r.recording, r.marks
+        if r.kind == 'closed_loop':
+            family, channels = 'closed_loop_dropout', tuple(range(min(8, marks.shape[1])))
+            groups = [(str(c), rec.condition == c) for c in np.unique(rec.condition)]
+        else:
+            family, channels = 'dropout', tuple(rec.channels_used)
+            groups = [(None, np.ones(len(rec), bool))]
+        for condition, rows in groups:
+            hit = marks[rows].sum(axis=0)[list(channels)]
+            n = float(np.count_nonzero(rows))
+            keys, cols = _shares(family, channels, condition, hit[None] / n)
+            for key, value in zip(keys, cols[0][0] if cols else []):
+                width = len(channels) if len(key.sensors) > 1 else 1
+                total = out.setdefault(key, [0.0, 0.0])
+                total[0] += float(value) * n * width
+                total[1] += n * width
+    for v in out.values():
+        v[0] = float(np.round(v[0]))
+    return out
+
+
+def test(r: float, n_r: float, s: float, n_s: float) -> tuple[float, float]:
+    """(z, standard error of the difference in shares) of ``r`` events in ``n_r`` real
+    readings against ``s`` in ``n_s`` simulated: the conditional binomial test of equal
+    rates as a normal z; 0 when neither side has any."""
+    k = r + s
+    d = r / n_r - s / n_s
+    se0 = float(np.sqrt(max(k, 1.0) / (n_r + n_s) * (1.0 / n_r + 1.0 / n_s)))
+    if k <= 0:
+        return 0.0, se0
+    f = n_r / (n_r + n_s)
+    p = min(1.0, 2.0 * min(sps.binom.sf(r - 1, k, f), sps.binom.cdf(r, k, f)))
+    z = float(min(sps.norm.isf(p / 2.0), Z_CAP)) * (1.0 if d >= 0 else -1.0)
+    if abs(z) < 1e-9 or abs(d) <= 0:
+        return 0.0, se0
+    return z, abs(d) / abs(z)
+
+
+def recount(c: Comparison, real: dict[Key, list[float]],
+            sim: dict[Key, list[float]]) -> Comparison:
+    """``c`` with the counted statistics judged by ``test``."""
+    counted = having('counted')
+    rows = [i for i, k in enumerate(c.keys) if k.family in counted and k in real and k in sim
+            and real[k][1] > 0 and sim[k][1] > 0]
+    if not rows:
+        return c
+    out = copy.copy(c)
+    out.real, out.sim, out.se, out.z = (np.array(v, np.float64) for v in (c.real, c.sim, c.se, c.z))
+    out._families = None
+    for i in rows:
+        (r, n_r), (s, n_s) = real[c.keys[i]], sim[c.keys[i]]
+        out.z[i], out.se[i] = test(r, n_r, s, n_s)
+        out.real[i], out.sim[i] = r / n_r, s / n_s
+    return out
+
+
+def count_copies(samples: int, copies: int) -> int:
+    """Copies simulated for the counts: the comparison's own when they hold half of
+    ``COUNT_SAMPLES`` readings, else ``COUNT_SAMPLES`` readings (at most ``MAX_COPIES``)."""
+    n = max(samples, 1)
+    if n * copies >= COUNT_SAMPLES / 2:
+        return copies
+    return int(max(copies, min(MAX_COPIES, np.ceil(COUNT_SAMPLES / n))))
+
+
+def undecided(real: dict[Key, list[float]], sim: dict[Key, list[float]]) -> bool:
+    """``EVENTS`` or more real events beside fewer than ``KNOWN`` simulated ones?"""
+    return any(r >= EVENTS and sim[key][0] < KNOWN for key, (r, _) in real.items() if key in sim)
+
+
+# -- evidence for the converter's fit ------------------------------------------------------
+
+def limits(real: Array, sim: Array, sensors: Sequence[int],
+           reading_range: tuple[float, float]) -> list[dict[str, Any]]:
+    """The limits the real readings pile up at: {end, value, share, sensors}, pooled over
+    the sensors whose extreme sits at the same value (limits of the reading range itself
+    are modelled and do not count)."""
+    out: list[dict[float, list[tuple[Any, ...]]]] = [{}, {}]
+    for sensor in sensors:
+        x, y = real[:, sensor], sim[:, sensor]
+        x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+        values, count = np.unique(x, return_counts=True)
+        if values.size < 2 or y.size == 0:
+            continue
+        for end, (value, at, inner) in enumerate(((values[0], count[0], count[1]),
+                                                  (values[-1], count[-1], count[-2]))):
+            if value == reading_range[end]:
+                continue
+            beyond, held = (np.mean(y < value), np.mean(y <= value)) if end == 0 else \
+                (np.mean(y > value), np.mean(y >= value))
+            out[end].setdefault(float(value), []).append(
+                (sensor, at, inner, x.size, beyond, held, np.mean(y == value)))
+    found = []
+    for end, by_value in enumerate(out):
+        for value, rows in by_value.items():
+            at, inner, n = (sum(r[j] for r in rows) for j in (1, 2, 3))
+            expected, held, there = (sum(r[3] * r[j] for r in rows) for j in (4, 5, 6))
+            if expected >= EXPECTED and at >= HELD * held and at > inner \
+                    and at - there >= MIN_SHARE * n and at - there > Z * np.sqrt(there + 1.0):
+                found.append({'end': end, 'value': value, 'share': round(float(at / n), 5),
+                              'sensors': tuple(sorted(r[0] for r in rows))})
+    return found
+
+
+def grid(x: Array) -> tuple[int, int]:
+    """(step, origin): the coarsest lattice origin + k * step (2..32) on which nearly all
+    integer readings ``x`` lie, else (1, 0)."""
+    if x.size < 20 or not np.all(x == np.round(x)):
+        return 1, 0
+    values, weight = np.unique(x, return_counts=True)
+    for q in range(32, 1, -1):
+        hist = np.bincount(np.mod(values, q).astype(np.int64), weights=weight)
+        if hist.max() >= 0.95 * x.size:
+            return q, int(hist.argmax())
+    return 1, 0
+
+
+def dropouts(real: Sequence[Any], sim: Sequence[Any]) -> dict[int, tuple[float, float]]:
+    """{sensor: (value, rate)} of the sensors with more dropouts than the simulator's
+    replays (in order, any copies) give, alone or pooled with sensors at the same value."""
+    if not real:
+        return {}
+    sensors = list(real[0].recording.channels_used)
+    c = len(sensors)
+    hits, total = np.zeros((c, 2)), np.zeros(c)
+    expected, var = np.zeros((c, 2)), np.zeros((c, 2))
+    votes = [[Counter[float](), Counter[float]()] for _ in sensors]
+    for i, r in enumerate(real):
+        h, n, values = _marked(r, sensors)
+        hits += h
+        total += n
+        for k, v in enumerate(values):
+            for end in (0, 1):
+                if h[k, end]:
+                    votes[k][end][float(v[end])] += h[k, end]
+        if i < len(sim):
+            hs, ns, _ = _marked(sim[i], sensors)
+            copies = max(1.0, ns.max() / max(n.max(), 1.0))
+            with np.errstate(invalid='ignore', divide='ignore'):
+                e = np.where(ns[:, None] > 0, hs / ns[:, None] * n[:, None], 0.0)
+            expected += e
+            var += e + 1.0 / copies           # Poisson, and the simulator's own count
+    out: dict[int, tuple[float, float]] = {}
+    for end in (0, 1):
+        excess = hits[:, end] - expected[:, end]
+        alone = (hits[:, end] >= MIN_HITS) & (excess > DROP_Z * np.sqrt(var[:, end]))
+        for k in np.flatnonzero(alone):
+            rate = float(excess[k] / total[k])
+            if sensors[k] not in out or rate > out[sensors[k]][1]:
+                out[sensors[k]] = (votes[k][end].most_common(1)[0][0], rate)
+        by_value: dict[float, list[int]] = {}
+        for k in np.flatnonzero(hits[:, end] > 0):
+            by_value.setdefault(votes[k][end].most_common(1)[0][0], []).append(int(k))
+        for value, ks in by_value.items():
+            if hits[ks, end].sum() >= MIN_HITS and len(ks) > 1 and \
+                    excess[ks].sum() > DROP_Z * np.sqrt(var[ks, end].sum()):
+                rate = float(excess[ks].sum() / total[ks].sum())
+                for k in ks:
+                    out.setdefault(sensors[k], (value, rate))
+    return out
+
+
+def seen_share(repaired: Sequence[Any], sensors: Sequence[int]) -> float:
+    """The share of dropouts marked among the ``sensors``' readings."""
+    hits = total = 0.0
+    for r in repaired:
+        h, n, _ = _marked(r, list(r.recording.channels_used))
+        used = [list(r.recording.channels_used).index(s) for s in sensors]
+        hits += h[used].sum()
+        total += n[used].sum()
+    return hits / max(total, 1.0)
+
+
+def _marked(r: Any, sensors: list[int]) -> tuple[Array, Array, list[tuple[float, float]]]:
+    """(hits (C, 2), readings (C,), [(low, high)] per sensor) of a repaired recording."""
+    counted = np.isfinite(r.recording.readings[:, sensors]).sum(axis=0).astype(np.float64)
+    return r.marks[:, sensors].sum(axis=0), counted, [tuple(r.ends[s]) for s in sensors]
+
+
+def rescaled_rate(rate: float, real_share: float, sim_share: float) -> float:
+    """A dropout rate scaled by the real over the simulated share seen (a dropout near its
+    level is not seen, on either side alike)."""
+    if sim_share <= 0:
+        return rate
+    return round(float(np.clip(rate * real_share / sim_share, rate, MAX_RATE)), 5)

@@ -1,0 +1,354 @@
+"""Measurements that locate an effect, real recordings against their replays: which sensors'
+noise is shared (fast or slow part), which wander on their own, whether the levels
+change together over time, and the spread's excess by light level.
+
+* Group evidence: per lighting condition, the Fisher z of the real against the
+  simulated correlation of each pair's *fast* part (first differences within a run: a
+  slow change cancels) or *slow* part (means of consecutive windows), Stouffer-combined
+  over conditions.  Closed loop alone: the comparison's own noise correlations.
+* Own wander: each sensor's residual less its per-run regression on the mean of the
+  others (what it does not share), its autocorrelation at ``OWN_LAGS`` real against
+  simulated (one-sided z, Holm); wandering sensors are taken out of the shared part one
+  at a time.
+* Shared change: each run's *shared factor*, the median over sensors of the run's mean
+  over the simulated level of its cell (each sensor's calibration line taken out);
+  factors that vary more from run to run than the simulator's (an F test on their log
+  spread, beyond what fast shared noise adds) are a shared change over time.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import stats as sps
+
+from ..effects.base import Array
+from ..effects.evidence import Row, holm
+from ..recording import Recording
+from .compare import ALPHA, Comparison
+from .replay import runs
+
+WINDOW = 8                    # samples averaged into one value of the slow part
+CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
+                'loop_change_correlation')
+LOOP_SPREADS = ('loop_still_spread', 'loop_residual_spread', 'loop_change_spread')
+OWN_LAGS, OWN_SKIP, OWN_RUN = (1, 3, 10), 3, 24
+MIN_LEVEL = 20.0              # readings; darker cells carry no usable ratio or own part
+CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
+
+
+# -- groups ----------------------------------------------------------------------------
+
+def part_sums(rec: Recording, part: str) -> dict[str, list[Any]]:
+    """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
+    residuals."""
+    used = list(rec.channels_used)
+    out: dict[str, list[Any]] = {}
+    for r in runs(rec):
+        y = rec.readings[r][:, used].astype(np.float64)
+        if part == 'fast':
+            d = np.diff(y, axis=0)
+        else:
+            k = y.shape[0] // WINDOW
+            d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
+        if d.shape[0] < 2:
+            continue
+        d = d - d.mean(axis=0) if part == 'fast' else d
+        acc = out.setdefault(str(rec.condition[r[0]]), [0.0, 0])
+        acc[0] = acc[0] + d.T @ d
+        acc[1] += d.shape[0]
+    return out
+
+
+def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
+                  part: str) -> Array:
+    """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
+    conditions (0 on the diagonal)."""
+    zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))
+    pooled = [_pool([part_sums(r, part) for r in recs]) for recs in (real, sim)]
+    for cond, (sr, nr) in pooled[0].items():
+        if cond not in pooled[1] or nr < 8:
+            continue
+        ss, ns = pooled[1][cond]
+        se = np.sqrt(1.0 / max(nr - 3, 1) + 1.0 / max(ns - 3, 1))
+        with np.errstate(invalid='ignore'):
+            z = (np.arctanh(np.clip(_corr(sr), -0.999, 0.999)) -
+                 np.arctanh(np.clip(_corr(ss), -0.999, 0.999))) / se
+        ok = np.isfinite(z)
+        zsum += np.where(ok, z, 0.0)
+        count += ok
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    np.fill_diagonal(out, 0.0)
+    return out
+
+
+def _pool(parts: list[dict[str, list[Any]]]) -> dict[str, list[Any]]:
+    out: dict[str, list[Any]] = {}
+    for p in parts:
+        for cond, (s, n) in p.items():
+            acc = out.setdefault(cond, [0.0, 0])
+            acc[0] = acc[0] + s
+            acc[1] += n
+    return out
+
+
+def _corr(s: Array) -> Array:
+    d = np.sqrt(np.clip(np.diag(s), 1e-12, None))
+    out: Array = s / d[:, None] / d[None, :]
+    return out
+
+
+def combined(rows: Sequence[tuple[tuple[int, ...], float]], channels: Sequence[int]) -> Array:
+    """(C, C) Stouffer-combined z of pair rows (sensors, z)."""
+    channels = list(channels)
+    n = len(channels)
+    zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    for sensors, z in rows:
+        if np.isfinite(z) and all(s in channels for s in sensors):
+            a, b = (channels.index(s) for s in sensors)
+            for i, j in ((a, b), (b, a)):
+                zsum[i, j] += z
+                count[i, j] += 1
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out: Array = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    return out
+
+
+def loop_group_evidence(c: Comparison, channels: Sequence[int], part: str) -> Array:
+    """Group evidence of a closed-loop comparison: its stationary correlations if any, else
+    (fast part) its noise correlations (the change view only where no direct view is)."""
+    z = combined([(k.sensors, z) for k, z in zip(c.keys, c.z) if k.family == 'correlation'],
+                 channels)
+    if part != 'fast' or z.any():
+        return z
+    direct = {k.family for k in c.keys} & set(CORRELATIONS[:2])
+    families = direct or set(CORRELATIONS)
+    return combined([(k.sensors, z) for k, z in zip(c.keys, c.z) if k.family in families],
+                    channels)
+
+
+def correlation_evidence(keys: Sequence[Any], estimate: Array, se: Array,
+                         channels: Sequence[int]) -> Array:
+    """(C, C) z of correlations against zero (real data alone), Stouffer over conditions."""
+    return combined([(k.sensors, v / s if s > 0 else 0.0)
+                     for k, v, s in zip(keys, estimate, se)
+                     if k.family == 'correlation' and np.isfinite(v) and np.isfinite(s)],
+                    channels)
+
+
+# -- spreads ---------------------------------------------------------------------------
+
+def spread_cells(c: Comparison, level: dict[tuple[Any, ...], float], sensors: Sequence[int],
+                 closed_loop: bool) -> list[tuple[float, float]]:
+    """[(level, real minus simulated variance)] of ``sensors``: each stationary cell at its
+    simulated level (unless ``closed_loop``), then the closed loop's still view per level
+    band (at the band's middle) and its residual view per sensor at its real mean level
+    (``level``: closed_loop_level by (sensors, condition)); the change view only where
+    neither exists (its regression takes part of the noise too)."""
+    out = []
+    if not closed_loop:
+        sim_level = {(r.key.sensors, r.key.condition, r.key.part): r.sim
+                     for r in reversed(c.rows('level'))}
+        out += [(sim_level[(r.key.sensors, r.key.condition, r.key.part)], r.real ** 2 - r.sim ** 2)
+                for r in c.rows('spread') if r.key.sensors[0] in sensors
+                and (r.key.sensors, r.key.condition, r.key.part) in sim_level]
+    rows = [r for f in LOOP_SPREADS for r in c.rows(f)]
+    direct = [r for r in rows if r.key.family != 'loop_change_spread']
+    for r in direct or rows:
+        if r.key.sensors[0] not in sensors or not (np.isfinite(r.real) and np.isfinite(r.sim)):
+            continue
+        excess = r.real * r.real - r.sim * r.sim
+        if r.key.family != 'loop_residual_spread':
+            lo, hi = (float(v) for v in str(r.key.part).split()[1].split('-'))
+            out.append(((lo + hi) / 2, excess))
+        elif (r.key.sensors, r.key.condition) in level:
+            out.append((level[(r.key.sensors, r.key.condition)], excess))
+    return out
+
+
+# -- own wander ------------------------------------------------------------------------
+
+def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[Array, ...]:
+    """Over runs: (runs, lags, sensors) autocorrelation of each sensor's own part,
+    (runs, sensors) its lag-1 autocovariance over the squared level, a usable mask.  The
+    shared part is the mean of the others among ``shared_by`` (positions; default all)."""
+    used = list(rec.channels_used)
+    n = len(used)
+    kept = [r[OWN_SKIP:] for r in runs(rec) if r.size >= OWN_RUN + OWN_SKIP]
+    if not kept or n < 3:
+        return np.empty((0, len(OWN_LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
+    ref = np.zeros(n, bool)
+    ref[list(range(n)) if shared_by is None else list(shared_by)] = True
+    sizes = np.array([r.size for r in kept])
+    starts = np.r_[0, np.cumsum(sizes)[:-1]]
+    y = rec.readings[np.concatenate(kept)][:, used].astype(np.float64)
+    level = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
+    y -= np.repeat(level, sizes, axis=0)
+    others = (y[:, ref].sum(axis=1, keepdims=True) - y * ref) / np.maximum(ref.sum() - ref, 1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        beta = np.add.reduceat(y * others, starts, axis=0) / \
+            np.add.reduceat(others * others, starts, axis=0)
+    e = y - np.repeat(np.nan_to_num(beta), sizes, axis=0) * others
+    den = np.add.reduceat(e * e, starts, axis=0)
+    good = (den > 0) & (level > MIN_LEVEL)
+    left = np.repeat(sizes, sizes) - (np.arange(y.shape[0]) - np.repeat(starts, sizes))
+    lagged = []
+    for k in OWN_LAGS:                  # products within a run only: partners k rows on
+        product = np.zeros_like(e)
+        np.multiply(e[:-k], e[k:], out=product[:-k], where=(left[:-k] > k)[:, None])
+        lagged.append(np.add.reduceat(product, starts, axis=0))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        a = np.stack(lagged, axis=1) / den[:, None, :]
+        c = lagged[0] / (sizes - 1)[:, None] / np.square(level)
+    return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
+
+
+def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
+               used: list[int]) -> dict[int, dict[str, Any]]:
+    """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
+    (ar, cr, okr), (as_, cs, oks) = (tuple(np.concatenate([p[i] for p in parts])
+                                           for i in range(3)) for parts in (real, sim))
+    out = {}
+    for k, s in enumerate(used):
+        x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
+        if x.size < 3 or y.size < 3:
+            continue
+        se = np.sqrt(x.var(ddof=1) / x.size + y.var(ddof=1) / y.size)
+        if not se > 0:
+            continue
+        z = float((x.mean() - y.mean()) / se)
+        extra = np.nanmean(cr[okr[:, k], k]) - np.nanmean(cs[oks[:, k], k])
+        lags = ar[okr[:, k], :, k].mean(axis=0) - as_[oks[:, k], :, k].mean(axis=0)
+        out[s] = {'z': z, 'p': float(sps.norm.sf(z)),
+                  'acf': {lag: float(v) for lag, v in zip(OWN_LAGS, lags)},
+                  'sd': float(np.sqrt(max(extra, 0.0)))}
+    return out
+
+
+def wandering(parts: Any, used: list[int]) -> dict[int, dict[str, Any]]:
+    """The sensors whose own part is more autocorrelated than simulated (Holm at
+    ``ALPHA``), found one at a time: the most significant is taken out of the shared part
+    (the mean of the others carries their wanders into a steady sensor's own part) and the
+    rest tested again while two remain.  ``parts(shared_by)``: (real, simulated) own parts."""
+    shared_by, found = list(range(len(used))), {}
+    while len(shared_by) >= 2:
+        ex = own_excess(*parts(tuple(shared_by)), used)
+        mine = {s: v for s, v in ex.items() if used.index(s) in shared_by}
+        sensors = sorted(mine)
+        adjusted = holm(np.array([mine[s]['p'] for s in sensors])) if sensors else []
+        left = {s: mine[s] for s, q in zip(sensors, adjusted) if q < ALPHA}
+        if not left:
+            break
+        if len(shared_by) == 2 and len(left) == 2:     # no steady sensor left to tell
+            found.update(left)
+            break
+        top = max(left, key=lambda s: left[s]['z'])
+        found[top] = left[top]
+        shared_by.remove(used.index(top))
+    return dict(sorted(found.items()))
+
+
+# -- shared change -------------------------------------------------------------------
+
+def _cell(rec: Recording, r: np.ndarray) -> tuple[str, float]:
+    return str(rec.condition[r[0]]), float(np.round(rec.heading_deg[r[0]], 1))
+
+
+def _factors(rec: Recording, reference: dict[Any, Array], sensors: list[int]) -> list[Any]:
+    """[(run, cell, run means, simulated levels, white variance of the run means)]."""
+    out = []
+    for r in runs(rec):
+        ref = reference.get(_cell(rec, r))
+        if ref is None or r.size < 2:
+            continue
+        x = rec.readings[r][:, sensors].astype(np.float64)
+        mean = x.mean(axis=0)
+        if ((ref > MIN_LEVEL) & np.isfinite(mean)).sum() >= MIN_SENSORS:
+            fast = np.diff(x, axis=0).mean(axis=1)       # the part all sensors share
+            out.append((r, _cell(rec, r), mean, ref, float(np.mean(fast * fast)) / 2 / r.size))
+    return out
+
+
+def _shared(rows: list[Any], rounds: int = 3) -> Array:
+    """Each run's shared factor with each sensor's calibration line (a + b level) taken out:
+    factors and lines fitted in turn, the factors' geometric mean 1; ``rounds`` 1: the
+    plain median ratios."""
+    mean = np.array([row[2] for row in rows])
+    ref = np.array([row[3] for row in rows])
+    ok = (ref > MIN_LEVEL) & np.isfinite(mean)
+    a, b = np.zeros(mean.shape[1]), np.ones(mean.shape[1])
+    factor = np.ones(len(rows))
+    for _ in range(rounds):
+        line = a + b * ref
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.where(ok & (line > 0), mean / line, np.nan)
+        factor = np.nanmedian(ratio, axis=1)
+        if rounds > 1:
+            factor = factor / np.exp(np.mean(np.log(factor)))
+        for s in range(mean.shape[1]):
+            use = ok[:, s]
+            if use.sum() >= MIN_RUNS and np.ptp(ref[use, s]) >= 1.0:
+                b[s], a[s] = np.polyfit(ref[use, s], mean[use, s] / factor[use], 1)
+    return factor
+
+
+def shared_change(real: Sequence[Recording], sim: Sequence[Recording],
+                  sensors: list[int]) -> dict[str, Any] | None:
+    """{p_value, ratio, excess_sd, significant, runs: [(run, factor)] per real recording,
+    sd} of a change over time shared by the sensors, or None with no way to tell."""
+    if not real or not sim:
+        return None
+    acc: dict[Any, list[Array]] = {}
+    for rec in sim:
+        for r in runs(rec):
+            acc.setdefault(_cell(rec, r), []).append(rec.readings[r][:, sensors])
+    reference = {cell: np.concatenate(v).mean(axis=0) for cell, v in acc.items()}
+    rows_real = [_factors(rec, reference, sensors) for rec in real]
+    rows_sim = [row for rec in sim for row in _factors(rec, reference, sensors)]
+    flat = [row for rows in rows_real for row in rows]
+    if len(flat) < 3 or len(rows_sim) < 3:
+        return None
+    logs = [np.log(_shared(rows)) for rows in (flat, rows_sim)]
+    (v_real, v_sim), (d_real, d_sim) = [float(np.var(v, ddof=1)) for v in logs], \
+        [v.size - 1 for v in logs]
+    if d_real < 2 or d_sim < 2 or v_sim <= 0:
+        return None
+    fast = [float(np.mean([row[4] for row in rows] / np.square(
+        [np.mean(row[2][(row[3] > MIN_LEVEL) & np.isfinite(row[2])]) for row in rows])))
+        for rows in (flat, rows_sim)]
+    expected = v_sim + max(fast[0] - fast[1], 0.0)
+    p = float(sps.f.sf(v_real / expected, d_real, d_sim))
+    excess = float(np.sqrt(max(v_real - expected, 0.0)))
+    plain = _shared(flat, rounds=1)     # where a condition has one run, lines absorb a change
+    runs_, k = [], 0
+    for rows in rows_real:
+        runs_.append([(row[0], float(f)) for row, f in zip(rows, plain[k:k + len(rows)])])
+        k += len(rows)
+    return {'p_value': p, 'ratio': float(v_real / expected), 'excess_sd': excess,
+            'significant': p < CHANGE_ALPHA and excess >= MIN_CHANGE, 'runs': runs_,
+            'sd': float(np.std(plain))}
+
+
+def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, Any]) -> list[Row]:
+    """Level rows whose real levels come from the readings with each run divided by its
+    shared factor."""
+    sums: dict[tuple[str, str | None], list[Any]] = {}
+    for rec, runs_ in zip(real, change['runs']):
+        x = rec.readings.astype(np.float64).copy()
+        for r, f in runs_:
+            x[r] = x[r] / f
+        for r, _ in runs_:
+            h = float(np.round(rec.heading_deg[r[0]], 1))
+            cell = (str(rec.condition[r[0]]), None if not np.isfinite(h) else f'heading {h:g} deg')
+            acc = sums.setdefault(cell, [0.0, 0])
+            acc[0] = acc[0] + x[r].sum(axis=0)
+            acc[1] += r.size
+    out = []
+    for row in rows:
+        acc = sums.get((str(row.key.condition), row.key.part))
+        if acc is not None:
+            real_level = float(acc[0][row.key.sensors[0]] / acc[1])
+            row = row._replace(real=real_level, z=(real_level - row.sim) / row.se)
+        out.append(row)
+    return out

@@ -1,0 +1,424 @@
+"""The compound diagnosis: a set of effects chosen by forward selection on held-out data.
+
+From the best single effect, each step fits every remaining candidate jointly with those
+already chosen (``Target.with_given``), scores the simulator with them on the held-out
+part, and keeps a candidate only if it lowers the held-out discrepancy significantly (in
+``1 - STEP_ALPHA`` of the paired bootstrap replicates) and by enough: ``MIN_ADDED`` of
+the discrepancy before any effect, or ``MIN_LOCAL`` of one part's own (a turn error acts
+only on the closed loop's statistics), or ``MIN_LEFT`` of what the chosen effects leave
+of one part, or ``MIN_LOCAL`` of one family's, or by the part it acts on alone
+(``part_step``); the last three are confirmed on a second simulator seed.  With the best
+candidate the chosen effects are refitted given the others (one backfitting pass), each
+refit kept only where it lowers the fitting part's discrepancy.  A latency and a turn
+error are also fitted each without the other (``_loop_pair``).  Among candidates that
+explain the data as well, the one with fewer free parameters is taken (``as_good``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..effects import REGISTRY, Effect, from_dict
+from ..effects.base import Array
+from ..effects.evidence import Candidate
+from .compare import Z_CAP, Comparison, chance, discrepancy, paired_p
+from .families import PARTS, having
+from .target import Target
+
+MIN_REDUCTION = 0.25      # a single effect must remove this share of the gap (``diagnose``)
+MIN_ADDED, MIN_LOCAL, MIN_LEFT = 0.005, 0.10, 0.50
+STEP_ALPHA = 0.05
+TIE = 0.10                # relative discrepancy within which the simpler effect is as good
+FINGERPRINT_REPLICATES = 40
+JOINT = 1                 # candidates per step refitted jointly with the chosen ones
+CONFIRM_SEED = 5003       # offset of the second simulator seed
+LOOP = ('sensor_latency', 'actuator_turn_error')
+
+
+def free(name: str) -> int:
+    """Free parameters of an effect (the parsimony rule's measure)."""
+    return REGISTRY[name].free
+
+
+def as_good(d_best: float, best_reps: Array, d_rival: float, rival_reps: Array,
+            alpha: float) -> bool:
+    """Does a rival explain the held-out data as well as the best: its discrepancy within
+    ``TIE`` of the best's, or not beaten in ``1 - alpha`` of the paired replicates?"""
+    return d_rival <= (1 + TIE) * d_best or float(np.mean(best_reps < rival_reps)) < 1 - alpha
+
+
+def fit_one(name: str, target: Target, c: Comparison) -> Candidate:
+    """The registered effect ``name`` fitted so that no failure escapes: an exception, or
+    parameters its model cannot run, end as a candidate with no effect and the reason."""
+    try:
+        cand = REGISTRY[name].fit(target.evidence(c))
+        if cand.effect is not None:
+            runnable(cand.effect)
+        return cand
+    except Exception as exc:      # noqa: BLE001 - one candidate's failure is its own
+        return Candidate(name, None, f'the fit failed: {type(exc).__name__}: {exc}')
+
+
+def runnable(effect: Effect) -> None:
+    """Raise ValueError unless ``effect`` survives its dict form and runs a few steps with
+    finite readings."""
+    effect = from_dict(effect.to_dict())
+    channels = max([8] + [s + 1 for s in effect.sensors])
+    rng = np.random.default_rng(0)
+    step = effect.start(2, channels, rng)
+    if effect.stage.value == 'turn':
+        out = step(np.array([10.0, -10.0]))
+    else:
+        out = [step(np.full((channels, 2), 200.0)) for _ in range(3)][-1]
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f'{effect.name} gives non-finite readings with {effect.to_dict()}')
+
+
+def second_seed(b: Target, chosen: list[Effect],
+                effects: list[Effect]) -> tuple[Target, Comparison, Comparison]:
+    """(the held-out target on another simulator seed, its comparisons with ``chosen`` and
+    with ``effects``): the paired bootstrap resamples the real data only, and the
+    simulator's own noise can make a small step."""
+    other = b.with_seed(b.seed + CONFIRM_SEED)
+    return other, other.compare(chosen), other.compare(effects)
+
+
+@dataclass
+class Compound:
+    effects: list[Effect]
+    steps: list[dict[str, Any]]
+    discrepancy_before: float
+    discrepancy_after: float
+    comparison: Comparison
+    replicates: Array
+    rejected: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def reduction(self) -> float:
+        return 1.0 - self.discrepancy_after / self.discrepancy_before \
+            if self.discrepancy_before > 0 else 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {'chosen': self.steps, 'discrepancy_before': self.discrepancy_before,
+                'discrepancy_after': self.discrepancy_after, 'heldout_reduction': self.reduction,
+                'rejected': self.rejected, 'min_added': MIN_ADDED, 'min_left': MIN_LEFT,
+                'step_alpha': STEP_ALPHA}
+
+
+def entry(effect: Effect, note: str, d_before: float, d_after: float, d_prev: float,
+          p: float) -> dict[str, Any]:
+    return {'name': effect.name, 'sensors': list(effect.sensors),
+            'parameters': effect.parameters(), 'discrepancy_after': d_after,
+            'added_reduction': (d_prev - d_after) / d_before if d_before > 0 else 0.0,
+            'cumulative_reduction': 1.0 - d_after / d_before if d_before > 0 else 0.0,
+            'p_value': p, 'note': note}
+
+
+@dataclass
+class Step:
+    cand: Candidate
+    after: Comparison
+    effects: list[Effect]
+    reps: Array
+    p: float
+    rule: str
+
+
+class Selection:
+    """Forward selection on fitting target ``a``, scored on held-out target ``b``."""
+
+    def __init__(self, a: Target, b: Target, first: Comparison, d_before: float):
+        self.a, self.b, self.first, self.d_before = a, b, first, d_before
+
+    def run(self, best: tuple[Effect, str, Comparison, Array], names: Sequence[str],
+            before_reps: Array, log: Callable[[str], None] | None = None) -> Compound:
+        effect0, note0, cmp0, reps0 = best
+        d_prev = cmp0.discrepancy
+        steps = [entry(effect0, note0, self.d_before, d_prev, self.d_before,
+                       paired_p(before_reps, reps0, self.d_before, d_prev))]
+        steps[0]['counted_by'] = 'top_effect'
+        chosen, current, current_reps = [effect0], cmp0, reps0
+        rejected: list[dict[str, Any]] = []
+        remaining = [n for n in names if n != effect0.name]
+        while remaining:
+            given = self.a.with_given(chosen)
+            c_given = given.compare(replicates=FINGERPRINT_REPLICATES)
+            trials = []
+            for name in remaining:
+                cand = fit_one(name, given, c_given)
+                after = None
+                if cand.effect is not None:
+                    try:
+                        after = self.b.compare(chosen + [cand.effect])
+                    except Exception:         # noqa: BLE001 - cannot run: not fitting
+                        cand = Candidate(name, None, 'cannot run')
+                if (cand.effect is None or after is None or after.discrepancy >= d_prev) and \
+                        name in LOOP and any(e.name in LOOP and e.name != name for e in chosen) \
+                        and _part(current, 'closed_loop') > _part_chance(current, 'closed_loop'):
+                    cand, after = self._loop_pair(chosen, name, cand, after)
+                if cand.effect is not None and after is not None:
+                    trials.append((after.discrepancy, cand, after))
+            if not trials:
+                break
+            trials.sort(key=lambda t: t[0])
+            step = None
+            for rank, (_, cand, after) in enumerate(trials):
+                effects = _with(chosen, cand)
+                if rank < JOINT or _confounded(current, after):
+                    joint = self.backfit(effects)       # a proxy chosen earlier can give way
+                    if joint != effects:
+                        after_joint = self.b.compare(joint)
+                        if after_joint.discrepancy < after.discrepancy:
+                            effects, after = joint, after_joint
+                rule, reps, p, added = self.judge(current, current_reps, chosen, effects, after,
+                                                  d_prev)
+                if rule:
+                    step = Step(cand, after, effects, reps, p, rule)
+                    break
+                rejected.append({'name': cand.name, 'added_reduction': added, 'p_value': p,
+                                 'note': cand.note,
+                                 'parts': self._detail(current, after)})
+            if step is None:
+                break
+            step = self._simplest(step, trials, current, current_reps, chosen, d_prev)
+            rejected = []
+            remaining.remove(step.cand.name)
+            chosen, current, current_reps = step.effects, step.after, step.reps
+            d_last, d_prev = d_prev, step.after.discrepancy
+            steps.append(entry(chosen[-1], step.cand.note, self.d_before, d_prev, d_last, step.p))
+            steps[-1]['counted_by'] = step.rule
+            if log:
+                log(f'compound: + {step.cand.name} -> {1 - d_prev / self.d_before:.2f}')
+        for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
+            s['parameters'], s['sensors'] = e.parameters(), list(e.sensors)
+        return Compound(chosen, steps, self.d_before, current.discrepancy, current, current_reps,
+                        rejected)
+
+    def _loop_pair(self, chosen: list[Effect], name: str, cand: Candidate,
+                   after: Comparison | None) -> tuple[Candidate, Comparison | None]:
+        """A latency and a turn error both move the readings' response to a turn: the one
+        chosen first takes the other's share.  The candidate is fitted given the chosen
+        effects other than the loop one, that one refitted given it; the better of that
+        and the plain fit."""
+        given = self.a.with_given([e for e in chosen if e.name not in LOOP])
+        alone = fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        if alone.effect is None:
+            return cand, after
+        out = list(chosen)
+        for i, e in enumerate(out):
+            if e.name in LOOP:
+                out[i] = self.refit(e, out[:i] + out[i + 1:] + [alone.effect])
+        try:
+            paired = self.b.compare(out + [alone.effect])
+        except Exception:         # noqa: BLE001 - cannot run: not fitting
+            return cand, after
+        if after is not None and after.discrepancy <= paired.discrepancy:
+            return cand, after
+        return Candidate(name, alone.effect, alone.note + ' (fitted with the loop effect '
+                                                          'refitted)', given=out), paired
+
+    def backfit(self, chosen: list[Effect]) -> list[Effect]:
+        """Each effect chosen before the last refitted given all the others, kept where it
+        lowers the fitting part's discrepancy."""
+        out = list(chosen)
+        for i in range(len(out) - 1):
+            out[i] = self.refit(out[i], out[:i] + out[i + 1:])
+        return out
+
+    def refit(self, effect: Effect, others: list[Effect]) -> Effect:
+        given = self.a.with_given(others)
+        cand = fit_one(effect.name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        if cand.effect is None or cand.effect == effect:
+            return effect
+        return cand.effect if given.objective([cand.effect]) < given.objective([effect]) \
+            else effect
+
+    def judge(self, current: Comparison, current_reps: Array, chosen: list[Effect],
+              effects: list[Effect], after: Comparison,
+              d_prev: float) -> tuple[str, Array, float, float]:
+        """(the rule the step counts by or '', its replicate discrepancies, p, added share)."""
+        b, d_new = self.b, after.discrepancy
+        reps = b.replicate_discrepancies(after)
+        p = paired_p(current_reps, reps, d_prev, d_new)
+        added = (d_prev - d_new) / self.d_before if self.d_before > 0 else 0.0
+        rule = ''
+        if p < STEP_ALPHA and d_new < d_prev:
+            before_any, left = _local_gains(self.first, current, after)
+            if added >= MIN_ADDED:
+                rule = 'min_added'
+            elif before_any >= MIN_LOCAL:
+                rule = 'min_local'
+            elif left >= MIN_LEFT and self._confirmed(chosen, effects,
+                                                      lambda o, pv, nw: _local_gains(
+                                                          pv, pv, nw)[1] >= MIN_LEFT):
+                rule = 'min_left'
+            elif d_prev - d_new >= MIN_LOCAL * d_prev and \
+                    _family_gain(b, self.first, current, after) >= MIN_LOCAL and \
+                    self._confirmed(chosen, effects, lambda o, pv, nw: _family_gain(
+                        o, self.first, pv, nw) >= MIN_LOCAL):
+                rule = 'family'
+        if not rule:             # a small part's share, judged on its own replicates
+            part = part_step(b, self.first, current, after)
+            if part:
+                other, prev, new = second_seed(b, chosen, effects)
+                if part_step(other, self.first, prev, new) == part:
+                    rule = f'part: {part}'
+        # only a slow wander widens the levels' error bars without bringing anything
+        # closer; an effect adding fast noise rightly widens the spreads' error bars
+        if rule and effects[-1].name == 'temporal_drift' and not _closer(current, after):
+            rule = ''
+        return rule, reps, p, added
+
+    def _confirmed(self, chosen: list[Effect], effects: list[Effect],
+                   holds: Callable[[Target, Comparison, Comparison], bool]) -> bool:
+        """The step lowers the discrepancy on a second simulator seed too (in ``1 - alpha``
+        of its paired replicates) and ``holds`` there."""
+        other, prev, new = second_seed(self.b, chosen, effects)
+        p = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
+                     prev.discrepancy, new.discrepancy)
+        return p < STEP_ALPHA and new.discrepancy < prev.discrepancy and holds(other, prev, new)
+
+    def _simplest(self, step: Step, trials: list[tuple[float, Candidate, Comparison]],
+                  current: Comparison, current_reps: Array, chosen: list[Effect],
+                  d_prev: float) -> Step:
+        """A candidate with fewer free parameters that also counts and explains the held-out
+        data as well (``as_good``), else the step's (a spread law of exponent 0 shared by a
+        few sensors is a group of correlated noise: told apart by the data alone the group
+        would lose to the law's extra parameter by chance half the time)."""
+        rivals = sorted((t for t in trials if t[1] is not step.cand
+                         and free(t[1].name) < free(step.cand.name)),
+                        key=lambda t: (free(t[1].name), t[0]))
+        for d, rival, rival_after in rivals:
+            if not as_good(step.after.discrepancy, step.reps, d,
+                           self.b.replicate_discrepancies(rival_after), STEP_ALPHA):
+                continue
+            effects = _with(chosen, rival)
+            rule, reps, p, _ = self.judge(current, current_reps, chosen, effects, rival_after,
+                                          d_prev)
+            if rule:
+                return Step(rival, rival_after, effects, reps, p, rule + ', simpler')
+        return step
+
+    def _detail(self, current: Comparison, after: Comparison) -> dict[str, Any]:
+        """Per part, what a rejected step did: its shares and the paired p on the part."""
+        out = {}
+        for part in PARTS:
+            d0, d1, d2 = (_part(c, part) for c in (self.first, current, after))
+            if d0 <= 0 and d1 <= 0:
+                continue
+            reps = [self.b.replicate_discrepancies(c.part(part)) for c in (current, after)]
+            out[part] = {'before_any': round(d0, 2), 'left': round(d1, 2), 'after': round(d2, 2),
+                         'gain_before_any': round((d1 - d2) / d0, 4) if d0 > 0 else 0.0,
+                         'gain_left': round((d1 - d2) / d1, 4) if d1 > 0 else 0.0,
+                         'p': round(paired_p(reps[0], reps[1], d1, d2), 3)}
+        return out
+
+
+def part_step(b: Target, first: Comparison, current: Comparison, after: Comparison) -> str:
+    """The part by which a step counts on its own paired replicates ('' for none): it is
+    significant there (alpha over the parts tried) and removes ``MIN_LOCAL`` of the part
+    before any effect or ``MIN_LEFT`` of what is left, while no other part gets
+    significantly worse and the total does not rise."""
+    if after.discrepancy >= current.discrepancy:
+        return ''
+    f, c, a = first.split(), current.split(), after.split()
+    parts = [p for p in c if p in a]
+    tried = [p for p in parts if c[p].discrepancy > chance(len(c[p].keys))]
+    if not tried:
+        return ''
+    reps = {p: (b.replicate_discrepancies(c[p]), b.replicate_discrepancies(a[p])) for p in parts}
+    for p in parts:             # no part may move away significantly (one-sided)
+        d1, d2 = c[p].discrepancy, a[p].discrepancy
+        if d2 > d1 and paired_p(reps[p][1], reps[p][0], d2, d1) < STEP_ALPHA:
+            return ''
+    best, gain = '', 0.0
+    for p in tried:
+        d0 = f[p].discrepancy if p in f else 0.0
+        d1, d2 = c[p].discrepancy, a[p].discrepancy
+        if d2 >= d1:
+            continue
+        local, left = (d1 - d2) / d0 if d0 > 0 else 0.0, (d1 - d2) / d1
+        if (local < MIN_LOCAL and left < MIN_LEFT) or \
+                paired_p(reps[p][0], reps[p][1], d1, d2) >= STEP_ALPHA / len(tried):
+            continue
+        if max(local, left) > gain:
+            best, gain = p, max(local, left)
+    return best
+
+
+def _with(chosen: list[Effect], cand: Candidate) -> list[Effect]:
+    assert cand.effect is not None
+    return list(chosen if cand.given is None else cand.given) + [cand.effect]
+
+
+def _part(c: Comparison, part: str) -> float:
+    keep = c.parts == part
+    return discrepancy(c.z[keep]) if keep.any() else 0.0
+
+
+def _part_chance(c: Comparison, part: str) -> float:
+    return chance(int(np.sum(c.parts == part)))
+
+
+def _confounded(current: Comparison, after: Comparison) -> bool:
+    """Does a step bring one part well closer while another moves away?  The effects
+    chosen before it, fitted without it, took part of its share: worth refitting them."""
+    closer = away = False
+    for part in PARTS:
+        d1, d2 = _part(current, part), _part(after, part)
+        limit = _part_chance(current, part)
+        closer |= d1 > limit and d1 - d2 >= MIN_LOCAL * d1
+        away |= d2 > d1 and d2 > limit
+    return closer and away
+
+
+def _local_gains(before: Comparison, current: Comparison,
+                 after: Comparison) -> tuple[float, float]:
+    """The largest share a step removes of one part's own held-out discrepancy: (of that
+    part before any effect, of what the chosen effects still leave of it)."""
+    before_any = left = 0.0
+    for part in PARTS:
+        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
+        if d0 > 0:
+            before_any = max(before_any, (d1 - d2) / d0)
+        if d1 > _part_chance(current, part):
+            left = max(left, (d1 - d2) / d1)
+    return before_any, left
+
+
+def _family_gain(b: Target, before: Comparison, current: Comparison,
+                 after: Comparison) -> float:
+    """The largest share a step removes of one family's own held-out discrepancy before any
+    effect, among families where the fall is significant on their own replicates (a
+    dominant effect makes most of a part; a drift beside it acts on other families)."""
+    best = 0.0
+    for fam in sorted({k.family for k in before.keys}):
+        of = (lambda f: f == fam)  # noqa: E731
+        d0, d1, d2 = (c.of(of).discrepancy for c in (before, current, after))
+        if d0 <= 0 or d2 >= d1 or (d1 - d2) / d0 < MIN_LOCAL or \
+                d1 <= chance(sum(k.family == fam for k in current.keys)):
+            continue
+        if paired_p(b.replicate_discrepancies(current.of(of)),
+                    b.replicate_discrepancies(after.of(of)), d1, d2) < STEP_ALPHA:
+            best = max(best, (d1 - d2) / d0)
+    return best
+
+
+def _closer(current: Comparison, after: Comparison) -> bool:
+    """Does the step bring the simulated statistics closer, judged at the error bars before
+    it: all of them, or those other than the ones a wander widens?"""
+    index = {k: i for i, k in enumerate(current.keys)}
+    rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
+    if not rows:
+        return True
+    ai, ci = (np.array(r, np.int64) for r in zip(*rows))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        z = (after.real[ai] - after.sim[ai]) / current.se[ci]
+    z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
+    if discrepancy(z) < discrepancy(current.z[ci]):
+        return True
+    widened = having('widened')
+    other = np.array([current.keys[i].family not in widened for i in ci], bool)
+    return discrepancy(z[other]) < discrepancy(current.z[ci][other])

@@ -1,0 +1,270 @@
+"""The statistics of stationary recordings, from per-block sums.
+
+A cell is a (condition, heading); a run is one episode in one cell, in step order; a
+block is up to ``length`` consecutive samples of a run (a lone sample carries no
+spread and is left out).  Residuals are readings about their run's mean.  Per cell:
+``level`` and ``spread``; per condition: ``correlation`` of every pair,
+``autocorrelation`` at ``LAGS``, ``kurtosis``, and ``own_autocorrelation``: the
+autocorrelation of what each sensor does not share with the others (its residual less
+its regression on the others' mean, per run, the first ``SKIP`` samples left out), where
+a wander of its own shows beside a fast noise all sensors share.  Per sensor:
+``spread_vs_level`` (the slope over cells) and ``step_response``: the first
+``STEP_LAGS`` samples after a change of heading, as the share of the change not yet
+followed (0 at once, 1 while the sensor still reports the old heading).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy import sparse
+
+from ..effects.base import Array
+from ..effects.evidence import Key
+from ..recording import Recording
+from . import bootstrap
+
+LAGS = (1, 3)
+STEP_LAGS = 3
+SKIP = 3                  # first samples of a run left out of the own part
+MIN_OWN = 3               # channels the own part needs (the others' mean of two is one sensor)
+
+
+def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
+    """(labels in order of first appearance, cell of each sample)."""
+    heading = np.round(rec.heading_deg, 1)
+    conditions, cond = np.unique(rec.condition, return_inverse=True)
+    pairs = np.stack([cond, np.where(np.isfinite(heading), heading, np.inf)], axis=1)
+    unique, first, index = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    labels = [(str(conditions[int(unique[i, 0])]),
+               float(unique[i, 1]) if np.isfinite(unique[i, 1]) else None) for i in order]
+    return labels, rank[index.ravel()]
+
+
+def units(rec: Recording, cell: np.ndarray) -> list[np.ndarray]:
+    """Sample indices of each (episode, cell) run, in step order."""
+    order = np.lexsort((rec.step, cell, rec.episode))
+    key = rec.episode[order] * (int(cell.max()) + 1 if cell.size else 1) + cell[order]
+    return np.split(order, np.flatnonzero(np.diff(key)) + 1) if order.size else []
+
+
+def block_length(rec: Recording, channels: list[int]) -> int:
+    """The block-length rule over each run's residuals; at least 5 samples (a block carries
+    spreads and lagged products), at most half the longest run."""
+    runs_ = [r for r in units(rec, cells(rec)[1]) if r.size >= 2]
+    if not runs_:
+        return 5
+    x = rec.readings[:, channels].astype(np.float64)
+    y = np.concatenate([x[r] - x[r].mean(axis=0) for r in runs_])
+    edges = np.cumsum([0] + [r.size for r in runs_])
+    segments = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    return bootstrap.block_length(y, segments, minimum=5,
+                                  maximum=max(5, max(r.size for r in runs_) // 2))
+
+
+class Grouping:
+    """Sums of per-sample values (kept samples in block order) by group: blocks for a
+    bootstrap, or whole strata where only the full data's sums are wanted (the same
+    totals, a fraction of the work)."""
+
+    def __init__(self, group: np.ndarray, size: int, strata: np.ndarray, of_block: np.ndarray):
+        self.size, self.strata, self.of_block = size, strata, of_block
+        self.pick = sparse.csr_matrix((np.ones(group.size, np.float32),
+                                       (group, np.arange(group.size))), shape=(size, group.size))
+        self.count = np.bincount(group, minlength=size).astype(np.float64)[:, None]
+
+    def __call__(self, values: Array) -> Array:
+        out: Array = np.asarray(self.pick @ values.reshape(values.shape[0], -1))
+        return out.reshape((self.size,) + values.shape[1:])
+
+
+class Layout:
+    """How a recording's samples fall into cells, runs and blocks: the same for every
+    replay of a protocol with as many copies (replays share their index columns)."""
+
+    def __init__(self, rec: Recording, length: int):
+        self.labels, cell = cells(rec)
+        self.cell = cell
+        self.runs = units(rec, cell)
+        sizes = np.array([r.size for r in self.runs], np.int64)
+        self.run_order = np.concatenate(self.runs)
+        self.run_of = np.empty(len(rec), np.int64)
+        self.run_of[self.run_order] = np.repeat(np.arange(len(self.runs)), sizes)
+        self.run_starts = np.r_[0, np.cumsum(sizes)[:-1]]
+        self.run_sizes = sizes
+        position = np.concatenate([np.arange(n) for n in sizes])
+        key = np.repeat(np.arange(len(self.runs)), sizes) * (position.max() // length + 2) \
+            + position // length
+        _, chunk = np.unique(key, return_inverse=True)
+        keep = np.bincount(chunk)[chunk] >= 2            # a lone sample carries no spread
+        kept, chunk = self.run_order[keep], np.unique(chunk[keep], return_inverse=True)[1]
+        stratum_of_chunk = np.zeros(int(chunk.max()) + 1 if chunk.size else 0, np.int64)
+        stratum_of_chunk[chunk] = cell[kept]
+        rank = np.empty_like(stratum_of_chunk)           # blocks in stratum order
+        rank[np.argsort(stratum_of_chunk, kind='stable')] = np.arange(rank.size)
+        block = rank[chunk]
+        by = np.argsort(block, kind='stable')
+        self.order, block = kept[by], block[by]          # kept samples, block by block
+        stratum = np.sort(stratum_of_chunk)
+        strata = len(self.labels)
+        self.by_block = Grouping(block, stratum.size, stratum, np.arange(stratum.size))
+        self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum)
+        block_of = np.full(len(rec), -1)
+        block_of[self.order] = block
+        self.lags = _lag_pairs(rec.step[self.order], self.run_of[self.order])
+        self.changes = _changes(rec, self.runs, block_of)
+        self.own_kept = (position >= SKIP).astype(np.float32)[:, None]
+
+
+def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
+    """Sums by ``total``'s groups of the statistics of readings ``x`` (N, C)."""
+    c = x.shape[1]
+    run_mean = np.add.reduceat(x[lay.run_order], lay.run_starts, axis=0) \
+        / lay.run_sizes[:, None]
+    y = x - run_mean[lay.run_of]
+    yo = y[lay.order]
+    out = {'n': total.count, 'sx': total(x[lay.order]), 's1': total(yo)}
+    # products in single precision (a block's few hundred samples keep 6 digits)
+    y32, own = yo.astype(np.float32), _own(y, lay)[lay.order].astype(np.float32)
+    i, j = np.triu_indices(c)
+    out.update({'s2': total(y32[:, i] * y32[:, j]), 's4': total(np.square(np.square(y32))),
+                'own_s2': total(own * own)})
+    for name, v in (('lag_s', y32), ('own_lag_s', own)):
+        out[name] = np.stack([total(_lagged(v, hit, partner, lag))
+                              for (hit, partner), lag in zip(lay.lags, LAGS)], axis=1)
+    out['lag_n'] = total(np.stack([hit for hit, _ in lay.lags], axis=1).astype(np.float32))
+    at, samples, old, new = lay.changes
+    dd, d2 = np.zeros((total.size, STEP_LAGS, c)), np.zeros((total.size, STEP_LAGS, c))
+    if at.size:
+        change = run_mean[old] - run_mean[new]
+        np.add.at(dd, total.of_block[at], (x[samples] - run_mean[new][:, None, :])
+                  * change[:, None, :])
+        np.add.at(d2, total.of_block[at], np.broadcast_to((change ** 2)[:, None, :],
+                                                           (at.size, STEP_LAGS, c)))
+    out['step_dd'], out['step_d2'] = dd, d2
+    return {k: v.astype(np.float64) for k, v in out.items()}
+
+
+def _lagged(v: Array, hit: np.ndarray, partner: np.ndarray, lag: int) -> Array:
+    """Each sample's product with its partner ``lag`` steps later (0 without one); the
+    partners lie ``lag`` rows on wherever a run's blocks are consecutive."""
+    out = np.zeros_like(v)
+    if partner.size > lag and np.array_equal(partner[:-lag][hit[:-lag]],
+                                             np.flatnonzero(hit[:-lag]) + lag):
+        np.multiply(v[:-lag], v[lag:], out=out[:-lag], where=hit[:-lag, None])
+    else:
+        out[hit] = v[hit] * v[partner[hit]]
+    return out
+
+
+def _own(y: Array, lay: Layout) -> Array:
+    """Each sensor's own part of the run residuals ``y``: less its per-run regression on
+    the mean of the others, zero at the first ``SKIP`` samples of a run."""
+    c = y.shape[1]
+    if c < MIN_OWN:
+        return np.zeros_like(y)
+    yr = (y[lay.run_order] * lay.own_kept).astype(np.float32)
+    others = (yr.sum(axis=1, keepdims=True) - yr) / (c - 1)
+    cross = np.add.reduceat(yr * others, lay.run_starts, axis=0)
+    square = np.add.reduceat(others * others, lay.run_starts, axis=0)
+    beta = np.divide(cross, square, out=np.zeros_like(cross), where=square > 0)
+    out = np.empty_like(yr)
+    out[lay.run_order] = yr - np.repeat(beta, lay.run_sizes, axis=0) * others
+    return out
+
+
+def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
+    """(keys, (R,) columns) from the resampled (R, S, D) sums."""
+    n = b.part(s, 'n')[..., 0]
+    s1, c = b.part(s, 's1'), len(b.channels)
+    i, j = np.triu_indices(c)
+    s2 = np.zeros(s.shape[:2] + (c, c))
+    s2[..., i, j] = s2[..., j, i] = b.part(s, 's2')
+    centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
+    level = b.part(s, 'sx') / n[..., None]
+    cell_sd = np.sqrt(np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1))
+    conditions = list(dict.fromkeys(cond for cond, _ in b.strata))
+    ch, r = b.channels, s.shape[0]
+    keys: list[Key] = []
+    cols = [np.stack([level, cell_sd], axis=3).reshape(r, -1)]
+    for cond, h in b.strata:
+        part = None if h is None else f'heading {h:g} deg'
+        for sensor in ch:
+            keys += [Key('level', (sensor,), cond, part), Key('spread', (sensor,), cond, part)]
+    pairs = np.triu_indices(c, 1)
+    for cond in conditions:
+        m = [i for i, lab in enumerate(b.strata) if lab[0] == cond]
+        dof = (n[:, m] - 1).sum(axis=1)
+        cov = centred[:, m].sum(axis=1) / dof[:, None, None]
+        var = np.diagonal(cov, axis1=-2, axis2=-1)
+        sd = np.sqrt(var)
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
+        acf = b.part(s, 'lag_s')[:, m].sum(axis=1) \
+            / b.part(s, 'lag_n')[:, m].sum(axis=1)[..., None] / var[:, None, :]
+        kurt = b.part(s, 's4')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None] / var ** 2 - 3.0
+        cols += [corr[:, pairs[0], pairs[1]], acf.reshape(r, -1), kurt]
+        keys += [Key('correlation', (ch[i], ch[j]), cond, None) for i, j in zip(*pairs)]
+        keys += [Key('autocorrelation', (k,), cond, f'lag {lag}') for lag in LAGS for k in ch]
+        keys += [Key('kurtosis', (k,), cond, None) for k in ch]
+        if c >= MIN_OWN:
+            own = b.part(s, 'own_lag_s')[:, m].sum(axis=1) \
+                / b.part(s, 'own_s2')[:, m].sum(axis=1)[:, None, :]
+            cols.append(own.reshape(r, -1))
+            keys += [Key('own_autocorrelation', (k,), cond, f'lag {lag}')
+                     for lag in LAGS for k in ch]
+    dl = level - level.mean(axis=1, keepdims=True)
+    ds = cell_sd - cell_sd.mean(axis=1, keepdims=True)
+    cols.append((dl * ds).sum(axis=1) / (dl * dl).sum(axis=1))
+    keys += [Key('spread_vs_level', (k,), None, None) for k in ch]
+    d2 = b.part(s, 'step_d2').sum(axis=1)                             # (R, J, C)
+    if (d2[0] > 0).any():
+        response = b.part(s, 'step_dd').sum(axis=1) / d2
+        timed = d2[0, 0] >= 100.0 * STEP_LAGS          # changes too small to time: left out
+        cols.append(response[:, :, timed].transpose(0, 2, 1).reshape(r, -1))
+        keys += [Key('step_response', (k,), None, f'sample {j} after a change')
+                 for k, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
+    return keys, cols
+
+
+def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per lag, (hit, partner): samples with a partner ``lag`` steps later in their run."""
+    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps \
+        if steps.size else steps.astype(np.int64)
+    sorter = np.argsort(key)
+    out = []
+    for lag in LAGS:
+        at = np.minimum(np.searchsorted(key, key + lag, sorter=sorter), max(key.size - 1, 0))
+        partner = sorter[at] if key.size else at
+        hit = key[partner] == key + lag if key.size else np.zeros(0, bool)
+        out.append((hit, partner))
+    return out
+
+
+def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tuple[Any, ...]:
+    """(block, first ``STEP_LAGS`` samples, old run, new run) of every change of heading
+    between consecutive runs of an episode without a gap."""
+    by_start = sorted(range(len(runs)),
+                      key=lambda i: (int(rec.episode[runs[i][0]]), int(rec.step[runs[i][0]])))
+    out = []
+    for i, j in zip(by_start[:-1], by_start[1:]):
+        old, new = runs[i], runs[j]
+        b = block_of[new[0]]
+        if rec.episode[old[0]] == rec.episode[new[0]] and b >= 0 and \
+                rec.step[new[0]] == rec.step[old[-1]] + 1 and new.size > STEP_LAGS:
+            out.append((b, new[:STEP_LAGS], i, j))
+    if not out:
+        return (np.zeros(0, np.int64),) * 4
+    at, samples, old_, new_ = zip(*out)
+    return np.array(at), np.array(samples), np.array(old_), np.array(new_)
+
+
+def blocks(rec: Recording, x: Array, lay: Layout, total: Grouping,
+           more: dict[str, Array]) -> bootstrap.Blocks:
+    """The ``Blocks`` of a stationary recording grouped by ``total``: these sums and
+    ``more`` (the converter's)."""
+    table, layout = bootstrap.pack({**sums(lay, x, total), **more})
+    return bootstrap.Blocks('stationary', tuple(rec.channels_used), lay.labels, total.strata,
+                            table, layout)
