@@ -18,7 +18,7 @@ import numpy as np
 from ..core import evolution
 from ..effects import NAMES
 from ..gap import diagnose, report, simconfig, transfer
-from ..gap.replay import BASES, condition_world, kind
+from ..gap.protocol import BASES, condition_world, kind
 from ..recording import load
 
 HELP = 'diagnose the sim-to-real gap of recordings; fit the unmodelled effect behind it'

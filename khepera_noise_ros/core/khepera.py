@@ -7,7 +7,7 @@ lookup rather than a cosine per sensor per step.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -79,6 +79,9 @@ class World:
     def tenths_per_power(self) -> int:
         """Grid steps (tenths of a degree) that one unit of power turns."""
         return int(round(self.deg_per_power * 10))
+
+
+WORLD_KEYS = tuple(f.name for f in fields(World))     # the world's parameters, by name
 
 
 def _check_range(name: str, value: float, low: float, high: float) -> None:

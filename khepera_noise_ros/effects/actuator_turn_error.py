@@ -14,8 +14,8 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-from .base import Array, Effect, Stage, Step, param
-from .evidence import CLOSED_LOOP, Z_DETECT, Candidate, Evidence, golden
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, param
+from .fitting import CLOSED_LOOP, Z_DETECT, golden
 
 SCATTER = ('turn_scatter', 'turn_size_scatter')
 FAMILIES = ('turn_response', 'sensor_turn_response', 'turn_size') + SCATTER

@@ -15,13 +15,10 @@ import dataclasses
 import enum
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, TypeVar
+from typing import Any, Callable, ClassVar, NamedTuple, Protocol, Sequence, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
-
-if TYPE_CHECKING:
-    from .evidence import Candidate, Evidence
 
 Array = NDArray[np.float64]
 Step = Callable[[Array], Array]      # one sample: (channels, robots) levels, or (robots,) turns
@@ -200,6 +197,80 @@ class Effect:
             raise ValueError(f'effect {cls.name}: unknown field(s) {unknown}; allowed: '
                              f'{sorted(allowed)}')
         return cls(**{k: _tuple(v) for k, v in data.items() if k != 'name'})
+
+
+class Key(NamedTuple):
+    """A statistic's name: its family, sensors, lighting condition and part."""
+
+    family: str
+    sensors: tuple[int, ...]
+    condition: str | None
+    part: str | None
+
+
+class Row(NamedTuple):
+    """One statistic of a comparison, real against simulated."""
+
+    key: Key
+    real: float
+    sim: float
+    se: float
+    z: float
+
+
+@dataclass
+class Candidate:
+    """What a fitter returns: the fitted effect, or None and why not."""
+
+    name: str
+    effect: Effect | None
+    note: str
+    given: list[Effect] | None = None   # the chosen effects as refitted with it
+
+
+class Evidence(Protocol):
+    """The real recordings against the simulator (with the effects ``given`` already)."""
+
+    @property
+    def channels(self) -> list[int]: ...
+    @property
+    def kinds(self) -> frozenset[str]: ...
+    @property
+    def given(self) -> tuple[Effect, ...]: ...
+    @property
+    def observed_base(self) -> bool: ...
+    @property
+    def samples(self) -> int: ...
+
+    def rows(self, family: str) -> list[Row]:
+        """The comparison's statistics of ``family`` (none if it has none)."""
+    def families(self, part: str | None = None) -> frozenset[str]:
+        """The families of the real statistics (of one part of them)."""
+    def objective(self, effects: Sequence[Effect], kinds: tuple[str, ...] | None = None,
+                  families: frozenset[str] | None = None, limits: bool = False) -> float:
+        """The discrepancy with ``effects`` added (common random numbers)."""
+    def group_evidence(self, part: str) -> Array:
+        """(C, C) z that each pair's 'fast' or 'slow' noise is shared beyond the simulator's."""
+    def group_null(self, part: str) -> Array:
+        """The same z of simulated data against the simulator: the null for a stopping rule."""
+    def own_wander(self) -> dict[int, dict[str, Any]]:
+        """Sensors whose own part wanders more than simulated: {sensor: {z, sd, acf}}."""
+    def shared_change(self) -> dict[str, Any] | None:
+        """A change over time shared by the sensors: {significant, sd, ...} or None."""
+    def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]:
+        """Level rows with the shared change taken out of the real readings."""
+    def spread_cells(self, sensors: Sequence[int],
+                     closed_loop: bool = False) -> list[tuple[float, float]]:
+        """[(light level, real minus simulated variance)] of the sensors' noise."""
+    def converter(self) -> dict[str, Any]:
+        """The value distribution against the simulator's: limits, lattices, dropouts."""
+    def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect:
+        """``effect`` with its dropout rate scaled to the share of dropouts seen."""
+    def delayed_sensors(self) -> tuple[int, ...]:
+        """Sensors a latency may act on, from tracked headings (none without)."""
+    def stationary_runs(self, simulated: bool) -> list[Array]:
+        """Each stationary run's readings (samples, channels), real or simulated."""
+
 
 
 def rows(sensors: tuple[int, ...], channels: int) -> list[int]:

@@ -15,8 +15,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..core.khepera import DARK
-from .base import Array, Effect, Stage, Step, param, rows
-from .evidence import Candidate, Evidence, by_condition, names, refine
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, param, rows
+from .fitting import by_condition, names, refine
 
 THRESHOLD = 4.0
 

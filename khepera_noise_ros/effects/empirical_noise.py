@@ -17,8 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import Array, Effect, Stage, Step, ar1, param, rows
-from .evidence import Candidate, Evidence
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, ar1, param, rows
 
 KNOTS = 5
 WINDOW = 8        # samples averaged into one value of the slow part

@@ -17,9 +17,9 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..core.khepera import DARK
-from .base import Array, Effect, Stage, Step, columns, held, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, held, param, rows
 from .correlated_noise import groups_of
-from .evidence import Z_DETECT, Candidate, Evidence, names, refine
+from .fitting import Z_DETECT, names, refine
 
 EXPONENTS = (-0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
 DIRECTIONS = ('dark', 'bright')

@@ -14,8 +14,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..core.khepera import DARK
-from .base import Array, Effect, Stage, Step, param, rows
-from .evidence import STATIONARY, Candidate, Evidence, names
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, param, rows
+from .fitting import STATIONARY, names
 
 
 @dataclass(frozen=True)

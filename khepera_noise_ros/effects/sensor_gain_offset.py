@@ -8,8 +8,8 @@ import numpy as np
 from scipy import stats as sps
 
 from ..core.khepera import DARK
-from .base import Array, Effect, Stage, Step, columns, param, rows
-from .evidence import ALPHA, Candidate, Evidence, holm, names
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, param, rows
+from .fitting import ALPHA, holm, names
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import Array, Effect, Stage, Step, columns, param, rows
-from .evidence import CLOSED_LOOP, STATIONARY, Z_DETECT, Candidate, Evidence, names, present
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, param, rows
+from .fitting import CLOSED_LOOP, STATIONARY, Z_DETECT, names, present
 
 
 @dataclass(frozen=True)

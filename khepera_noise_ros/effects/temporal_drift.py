@@ -16,8 +16,8 @@ import numpy as np
 from scipy import stats as sps
 from scipy.optimize import minimize
 
-from .base import Array, Effect, Stage, Step, ar1, columns, param, rows
-from .evidence import ALPHA, Z_DETECT, Candidate, Evidence, Row, by_condition, holm, names
+from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, ar1, columns, param, rows
+from .fitting import ALPHA, Z_DETECT, by_condition, holm, names
 
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 # Nelder-Mead objectives: 16, or 10 inside the box the own wanders bound (there the later

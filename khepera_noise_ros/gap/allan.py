@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..recording import Recording
-from . import replay
+from .protocol import runs as run_indices
 
 SLOPES = {'white': -0.5, 'flicker': 0.0, 'random_walk': 0.5, 'drift': 1.0}
 
@@ -58,7 +58,7 @@ def profile(rec: Recording, factors=None) -> dict:
     """{'taus': [...], 'sensors': {s: [adev per tau]}, 'shared': [adev per tau]} of the
     recording's run residuals, pooled over runs (stationary recordings only)."""
     used = list(rec.channels_used)
-    runs = [r for r in replay.runs(rec) if r.size >= 3]
+    runs = [r for r in run_indices(rec) if r.size >= 3]
     longest = max((r.size for r in runs), default=0)
     factors = list(factors) if factors is not None else taus(longest)
     sums = np.zeros((len(factors), len(used) + 1))

@@ -20,14 +20,16 @@ autocorrelation>``), in three views:
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 from scipy import sparse
 
 from ..core.task import fitness_factors
 from ..effects.base import Array
-from ..effects.evidence import Key
+from ..effects.base import Key
 from ..recording import Recording
-from . import bootstrap, converter
+from . import bootstrap
 
 FACTORS = ('balance', 'intensity', 'turning')
 BANDS = (0.0, 175.0, 350.0)          # lower edges of the noise's level bands (readings)
@@ -50,7 +52,7 @@ def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
     return episodes, ep, order, steps, pair
 
 
-def blocks(rec: Recording, x: Array, marks: Array, perturb_every: int,
+def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], perturb_every: int,
            loop_only: bool = False) -> bootstrap.Blocks:
     """Per-episode sums of a closed-loop recording (repaired readings ``x``); with
     ``loop_only`` (no stationary recording beside it) the change view and the value
@@ -97,7 +99,7 @@ def blocks(rec: Recording, x: Array, marks: Array, perturb_every: int,
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
         parts['heading_band'] = _by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
     parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every, loop_only))
-    parts.update(converter.loop_sums(x[order], marks[order], ep, m, loop_only))
+    parts.update(more(order, ep, m))          # the converter's sums
     conditions = rec.conditions()
     first = rec.condition[order][np.r_[0, np.flatnonzero(np.diff(ep)) + 1]]
     stratum = np.array([conditions.index(str(c)) for c in first], np.int64)
@@ -285,8 +287,12 @@ def delayed_sensors(recordings: list[Recording]) -> tuple[int, ...]:
 
 # -- statistics ------------------------------------------------------------------------------
 
-def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
-    """(keys, (R,) columns) from the resampled (R, S, D) per-episode sums."""
+Part = Callable[[bootstrap.Blocks, Array, int, str], tuple[list[Key], list[Array]]]
+
+
+def stats(b: bootstrap.Blocks, s: Array, more: Part) -> tuple[list[Key], list[Array]]:
+    """(keys, (R,) columns) from the resampled (R, S, D) per-episode sums; ``more``: the
+    converter's statistics of each stratum."""
     keys: list[Key] = []
     cols: list[Array] = []
     n = b.part(s, 'n')[..., 0]
@@ -321,8 +327,8 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
             h = b.part(s, 'heading_band')[:, i].sum(axis=1)
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 2] / h[:, 1])
-        for more in (_noise_stats, _scatter_stats, converter.loop_stats):
-            k_, c_ = more(b, s, i, c)
+        for part in (_noise_stats, _scatter_stats, more):
+            k_, c_ = part(b, s, i, c)
             keys += k_
             cols += c_
     return keys, cols

@@ -9,6 +9,7 @@ far it lies beyond two standard errors, so the many that agree add (almost) noth
 """
 from __future__ import annotations
 
+import copy
 import functools
 import warnings
 from dataclasses import dataclass, field
@@ -18,10 +19,10 @@ import numpy as np
 from scipy import stats as sps
 
 from ..effects.base import Array
-from ..effects.evidence import Key, Row, holm
-from .families import FAMILIES, PARTS
+from ..effects.base import Key, Row
+from ..effects.fitting import ALPHA, holm
+from .families import FAMILIES, PARTS, having
 
-ALPHA = 0.01
 MARGIN = 2.0
 Z_CAP = 1e3
 # Discrepancy of one statistic with no gap, z ~ N(0, 1): the mean and variance of
@@ -183,3 +184,38 @@ def localise(c: Comparison, alpha: float = ALPHA) -> dict[str, dict[str, float]]
         for table, name, value in shares:
             out[table][name] = out[table].get(name, 0.0) + float(value)
     return {k: dict(sorted(v.items(), key=lambda kv: -kv[1])) for k, v in out.items()}
+
+
+def test(r: float, n_r: float, s: float, n_s: float) -> tuple[float, float]:
+    """(z, standard error of the difference in shares) of ``r`` events in ``n_r`` real
+    readings against ``s`` in ``n_s`` simulated: the conditional binomial test of equal
+    rates as a normal z; 0 when neither side has any."""
+    k = r + s
+    d = r / n_r - s / n_s
+    se0 = float(np.sqrt(max(k, 1.0) / (n_r + n_s) * (1.0 / n_r + 1.0 / n_s)))
+    if k <= 0:
+        return 0.0, se0
+    f = n_r / (n_r + n_s)
+    p = min(1.0, 2.0 * min(sps.binom.sf(r - 1, k, f), sps.binom.cdf(r, k, f)))
+    z = float(min(sps.norm.isf(p / 2.0), Z_CAP)) * (1.0 if d >= 0 else -1.0)
+    if abs(z) < 1e-9 or abs(d) <= 0:
+        return 0.0, se0
+    return z, abs(d) / abs(z)
+
+
+def recount(c: Comparison, real: dict[Key, list[float]],
+            sim: dict[Key, list[float]]) -> Comparison:
+    """``c`` with the counted statistics judged by ``test``."""
+    counted = having('counted')
+    rows = [i for i, k in enumerate(c.keys) if k.family in counted and k in real and k in sim
+            and real[k][1] > 0 and sim[k][1] > 0]
+    if not rows:
+        return c
+    out = copy.copy(c)
+    out.real, out.sim, out.se, out.z = (np.array(v, np.float64) for v in (c.real, c.sim, c.se, c.z))
+    out._families = None
+    for i in rows:
+        (r, n_r), (s, n_s) = real[c.keys[i]], sim[c.keys[i]]
+        out.z[i], out.se[i] = test(r, n_r, s, n_s)
+        out.real[i], out.sim[i] = r / n_r, s / n_s
+    return out

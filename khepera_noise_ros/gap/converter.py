@@ -18,19 +18,15 @@ common residue modulo small steps (``granularity``, ``loop_granularity`` in clos
 """
 from __future__ import annotations
 
-import copy
 import warnings
 from collections import Counter
 from typing import Any, Sequence
 
 import numpy as np
-from scipy import stats as sps
 
 from ..effects.base import Array
-from ..effects.evidence import Key
+from ..effects.base import Key
 from . import bootstrap
-from .compare import Z_CAP, Comparison
-from .families import having
 
 ENDS = ('to the lowest reading', 'to the highest reading')
 PILE_ENDS = ('at the lowest reading', 'at the highest reading')
@@ -397,41 +393,6 @@ def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
                 total[1] += n * width
     for v in out.values():
         v[0] = float(np.round(v[0]))
-    return out
-
-
-def test(r: float, n_r: float, s: float, n_s: float) -> tuple[float, float]:
-    """(z, standard error of the difference in shares) of ``r`` events in ``n_r`` real
-    readings against ``s`` in ``n_s`` simulated: the conditional binomial test of equal
-    rates as a normal z; 0 when neither side has any."""
-    k = r + s
-    d = r / n_r - s / n_s
-    se0 = float(np.sqrt(max(k, 1.0) / (n_r + n_s) * (1.0 / n_r + 1.0 / n_s)))
-    if k <= 0:
-        return 0.0, se0
-    f = n_r / (n_r + n_s)
-    p = min(1.0, 2.0 * min(sps.binom.sf(r - 1, k, f), sps.binom.cdf(r, k, f)))
-    z = float(min(sps.norm.isf(p / 2.0), Z_CAP)) * (1.0 if d >= 0 else -1.0)
-    if abs(z) < 1e-9 or abs(d) <= 0:
-        return 0.0, se0
-    return z, abs(d) / abs(z)
-
-
-def recount(c: Comparison, real: dict[Key, list[float]],
-            sim: dict[Key, list[float]]) -> Comparison:
-    """``c`` with the counted statistics judged by ``test``."""
-    counted = having('counted')
-    rows = [i for i, k in enumerate(c.keys) if k.family in counted and k in real and k in sim
-            and real[k][1] > 0 and sim[k][1] > 0]
-    if not rows:
-        return c
-    out = copy.copy(c)
-    out.real, out.sim, out.se, out.z = (np.array(v, np.float64) for v in (c.real, c.sim, c.se, c.z))
-    out._families = None
-    for i in rows:
-        (r, n_r), (s, n_s) = real[c.keys[i]], sim[c.keys[i]]
-        out.z[i], out.se[i] = test(r, n_r, s, n_s)
-        out.real[i], out.sim[i] = r / n_r, s / n_s
     return out
 
 

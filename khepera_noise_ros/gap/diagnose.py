@@ -24,12 +24,12 @@ import numpy as np
 from ..core.noise import ROUNDINGS
 from ..effects import NAMES, Effect, EmpiricalNoise
 from ..effects.base import Array
-from ..effects.evidence import Candidate
+from ..effects.base import Candidate
 from ..recording import Recording
 from . import allan, bootstrap, split
 from .compare import ALPHA, Comparison, entries, localise, paired_p
 from .families import having
-from .replay import base_mode, check, kind, name, runs
+from .protocol import base_mode, check, kind, name, runs
 from .select import MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
 from .simconfig import SimConfig
 from .target import Target

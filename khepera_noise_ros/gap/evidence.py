@@ -17,17 +17,18 @@ change together over time, and the spread's excess by light level.
 """
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from scipy import stats as sps
 
 from ..effects.base import Array
-from ..effects.evidence import Row, holm
+from ..effects.base import Row
+from ..effects.fitting import ALPHA, holm
 from ..recording import Recording
-from .compare import ALPHA, Comparison
-from .replay import runs
+from .protocol import runs
 
+Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
 WINDOW = 8                    # samples averaged into one value of the slow part
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
                 'loop_change_correlation')
@@ -115,17 +116,15 @@ def combined(rows: Sequence[tuple[tuple[int, ...], float]], channels: Sequence[i
     return out
 
 
-def loop_group_evidence(c: Comparison, channels: Sequence[int], part: str) -> Array:
-    """Group evidence of a closed-loop comparison: its stationary correlations if any, else
-    (fast part) its noise correlations (the change view only where no direct view is)."""
-    z = combined([(k.sensors, z) for k, z in zip(c.keys, c.z) if k.family == 'correlation'],
-                 channels)
+def loop_group_evidence(rows: Rows, channels: Sequence[int], part: str) -> Array:
+    """Group evidence of a closed-loop comparison (``rows`` of a family): its stationary
+    correlations if any, else (fast part) its noise correlations (the change view only
+    where no direct view is)."""
+    z = combined([(r.key.sensors, r.z) for r in rows('correlation')], channels)
     if part != 'fast' or z.any():
         return z
-    direct = {k.family for k in c.keys} & set(CORRELATIONS[:2])
-    families = direct or set(CORRELATIONS)
-    return combined([(k.sensors, z) for k, z in zip(c.keys, c.z) if k.family in families],
-                    channels)
+    families = [f for f in CORRELATIONS[:2] if rows(f)] or list(CORRELATIONS)
+    return combined([(r.key.sensors, r.z) for f in families for r in rows(f)], channels)
 
 
 def correlation_evidence(keys: Sequence[Any], estimate: Array, se: Array,
@@ -139,7 +138,7 @@ def correlation_evidence(keys: Sequence[Any], estimate: Array, se: Array,
 
 # -- spreads ---------------------------------------------------------------------------
 
-def spread_cells(c: Comparison, level: dict[tuple[Any, ...], float], sensors: Sequence[int],
+def spread_cells(rows: Rows, level: dict[tuple[Any, ...], float], sensors: Sequence[int],
                  closed_loop: bool) -> list[tuple[float, float]]:
     """[(level, real minus simulated variance)] of ``sensors``: each stationary cell at its
     simulated level (unless ``closed_loop``), then the closed loop's still view per level
@@ -149,13 +148,13 @@ def spread_cells(c: Comparison, level: dict[tuple[Any, ...], float], sensors: Se
     out = []
     if not closed_loop:
         sim_level = {(r.key.sensors, r.key.condition, r.key.part): r.sim
-                     for r in reversed(c.rows('level'))}
+                     for r in reversed(rows('level'))}
         out += [(sim_level[(r.key.sensors, r.key.condition, r.key.part)], r.real ** 2 - r.sim ** 2)
-                for r in c.rows('spread') if r.key.sensors[0] in sensors
+                for r in rows('spread') if r.key.sensors[0] in sensors
                 and (r.key.sensors, r.key.condition, r.key.part) in sim_level]
-    rows = [r for f in LOOP_SPREADS for r in c.rows(f)]
-    direct = [r for r in rows if r.key.family != 'loop_change_spread']
-    for r in direct or rows:
+    loop = [r for f in LOOP_SPREADS for r in rows(f)]
+    direct = [r for r in loop if r.key.family != 'loop_change_spread']
+    for r in direct or loop:
         if r.key.sensors[0] not in sensors or not (np.isfinite(r.real) and np.isfinite(r.sim)):
             continue
         excess = r.real * r.real - r.sim * r.sim

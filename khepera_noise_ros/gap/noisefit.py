@@ -32,7 +32,8 @@ from ..effects.correlated_noise import cluster
 from ..recording import Recording
 from . import split
 from .evidence import correlation_evidence
-from .replay import Replayer, check, kind, runs
+from .protocol import check, kind, runs
+from .replay import Replayer
 from .select import MIN_REDUCTION
 from .simconfig import SimConfig
 from .target import Target

@@ -18,120 +18,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core import network
-from ..core.khepera import DARK, SENSORS, World, to_tenths
+from ..core.khepera import DARK, SENSORS, to_tenths
 from ..core.noise import NoiseModel
 from ..effects import Effect
 from ..effects.base import Array
 from ..effects.simulate import EffectEpisodes, SimCache, stationary
 from ..recording import Recording
-from .simconfig import WORLD_KEYS, SimConfig
-
-BASES = ('auto', 'model', 'observed')
-MIN_SAMPLES = 40
-
-
-class ProtocolError(ValueError):
-    """The recording cannot be reproduced in the simulator; the message says why."""
-
-
-def kind(rec: Recording) -> str:
-    """'stationary' or 'closed_loop': the manifest's protocol, else whether turns are known."""
-    declared = rec.manifest.get('protocol')
-    if declared in ('stationary', 'closed_loop'):
-        return str(declared)
-    return 'closed_loop' if np.isfinite(rec.direction).any() else 'stationary'
-
-
-def runs(rec: Recording) -> list[np.ndarray]:
-    """Sample indices of each (episode, condition, heading) run, in step order."""
-    heading = np.nan_to_num(np.round(rec.heading_deg, 1), nan=1e9)
-    _, cond = np.unique(rec.condition, return_inverse=True)
-    order = np.lexsort((rec.step, heading, cond, rec.episode))
-    key = np.stack([rec.episode[order], cond[order], heading[order]], axis=1)
-    edges = np.flatnonzero((np.diff(key, axis=0) != 0).any(axis=1)) + 1
-    return np.split(order, edges) if order.size else []
-
-
-def episodes(rec: Recording) -> list[np.ndarray]:
-    """Sample indices of each episode in step order."""
-    _, ep = np.unique(rec.episode, return_inverse=True)
-    order = np.lexsort((rec.step, ep))
-    return np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
-
-
-def condition_world(rec: Recording, label: str, base: World) -> World:
-    params = rec.manifest.get('conditions', {}).get(label) or {}
-    given = {k: float(v) for k, v in params.items() if k in WORLD_KEYS} \
-        if isinstance(params, dict) else {}
-    try:
-        return dataclasses.replace(base, **given)
-    except ValueError as exc:
-        raise ProtocolError(f'condition {label!r}: {exc}') from None
-
-
-def base_mode(rec: Recording, requested: str = 'auto') -> tuple[str, str]:
-    """('model' or 'observed', why)."""
-    if requested not in BASES:
-        raise ValueError(f'base must be one of {BASES}, got {requested!r}')
-    reasons = []
-    if rec.channels != SENSORS:
-        reasons.append(f'the recording has {rec.channels} channels, the light model {SENSORS}')
-    if not np.isfinite(rec.heading_deg).all():
-        reasons.append('headings are not all known')
-    conditions = rec.manifest.get('conditions', {})
-    vague = [c for c in rec.conditions()
-             if not (isinstance(conditions.get(c), dict) and set(conditions[c]) & set(WORLD_KEYS))]
-    if vague:
-        reasons.append(f'conditions {vague} give no world parameters ({", ".join(WORLD_KEYS)})')
-    if requested == 'model' and reasons:
-        raise ProtocolError('cannot use the light model: ' + '; '.join(reasons))
-    if requested == 'observed' or reasons:
-        return 'observed', '; '.join(reasons) or 'requested'
-    return 'model', 'the light model at the recorded headings'
-
-
-def genome_of(rec: Recording) -> Array:
-    genome = rec.manifest.get('genome')
-    if genome is None:
-        raise ProtocolError('a closed-loop recording needs the controller genome in its '
-                            'manifest (genome: [20 numbers]) to be reproduced')
-    try:
-        out: Array = network.check_genomes(genome)[0]
-    except ValueError as exc:
-        raise ProtocolError(f'manifest genome: {exc}') from None
-    return out
-
-
-def check(recordings: Sequence[Recording]) -> None:
-    """Refuse input the diagnosis cannot make sense of: a ValueError of one line naming the
-    recording and what is wrong (none given, too few samples, different channel layouts,
-    no variation, a closed-loop recording without its genome)."""
-    if not recordings:
-        raise ValueError('the diagnosis needs at least one recording')
-    for i, rec in enumerate(recordings):
-        rec.check()
-        if len(rec) < MIN_SAMPLES:
-            raise ValueError(f'recording {name(rec, i)} has {len(rec)} samples; the '
-                             f'diagnosis needs at least {MIN_SAMPLES}')
-    if len({(r.channels, tuple(r.channels_used)) for r in recordings}) > 1:
-        described = '; '.join(f'{name(r, i)}: {r.channels} channels, using '
-                              f'{r.channels_used}' for i, r in enumerate(recordings))
-        raise ValueError(f'the recordings disagree on their light channels ({described}); '
-                         f'diagnose recordings of one robot together')
-    for i, rec in enumerate(recordings):
-        if kind(rec) == 'stationary':
-            used = rec.readings[:, rec.channels_used]
-            if not any(np.ptp(used[r], axis=0).max() > 0 for r in runs(rec)):
-                raise ValueError(f'recording {name(rec, i)} has no variation: every used '
-                                 f'channel is constant at every heading, so its noise cannot '
-                                 f'be compared (a disconnected or stuck sensor?)')
-        else:
-            genome_of(rec)
-
-
-def name(rec: Recording, i: int) -> str:
-    return str(rec.manifest.get('name', f'#{i + 1}'))
-
+from .protocol import ProtocolError, base_mode, condition_world, genome_of, kind, runs
+from .simconfig import SimConfig
 
 class Replayer:
     """Replays of one recording's protocol under one configuration.  What every replay

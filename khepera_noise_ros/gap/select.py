@@ -22,7 +22,7 @@ import numpy as np
 
 from ..effects import REGISTRY, Effect, from_dict
 from ..effects.base import Array
-from ..effects.evidence import Candidate
+from ..effects.base import Candidate
 from .compare import Z_CAP, Comparison, chance, discrepancy, paired_p
 from .families import PARTS, having
 from .target import Target

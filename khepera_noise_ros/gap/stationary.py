@@ -20,7 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from ..effects.base import Array
-from ..effects.evidence import Key
+from ..effects.base import Key
 from ..recording import Recording
 from . import bootstrap
 

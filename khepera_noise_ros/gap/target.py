@@ -22,13 +22,14 @@ import numpy as np
 
 from ..effects import Effect
 from ..effects.base import Array
-from ..effects.evidence import Key, Row
+from ..effects.base import Key, Row
 from ..effects.simulate import SimCache
 from ..recording import Recording, reading_range
 from . import bootstrap, closedloop, converter, evidence, stationary
-from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors
+from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
 from .families import FAMILIES, having, of_part
-from .replay import Replayer, episodes, kind, runs
+from .protocol import episodes, kind, runs
+from .replay import Replayer
 from .simconfig import SimConfig
 
 SIM_COPIES = 3
@@ -153,8 +154,9 @@ class Target:
     def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
         rec = data.recording
         if data.kind == 'closed_loop':
-            b = closedloop.blocks(rec, rec.readings, data.marks, self.config.task.perturb_every,
-                                  self.loop_only)
+            b = closedloop.blocks(rec, rec.readings, lambda order, ep, m: converter.loop_sums(
+                rec.readings[order], data.marks[order], ep, m, self.loop_only),
+                self.config.task.perturb_every, self.loop_only)
         else:
             copies = len(rec) // len(self.recordings[i])
             key = (i, copies)
@@ -169,7 +171,7 @@ class Target:
         s = bootstrap.resampled(b, replicates, seed)
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
-                keys, cols = closedloop.stats(b, s)
+                keys, cols = closedloop.stats(b, s, converter.loop_stats)
             else:
                 keys, cols = stationary.stats(b, s)
                 more_keys, more_cols = converter.stationary_stats(b, s)
@@ -254,9 +256,9 @@ class Target:
         real, own = converter.counts(self.real_data), converter.counts(self.simulate(effects))
         k = converter.count_copies(sum(len(r) for r in self.recordings), self.copies)
         if k == self.copies or not converter.undecided(real, own):
-            return converter.recount(c, real, own)
+            return recount(c, real, own)
         more = self.simulate(effects, copies=k, remember=False)
-        return converter.recount(c, real, converter.counts(more))
+        return recount(c, real, converter.counts(more))
 
     def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
                   families: frozenset[str] | None = None, margin: float = MARGIN,
@@ -350,7 +352,7 @@ class TargetEvidence:
         t = self.target
         real = t.of_kind('stationary')
         if not real:
-            return evidence.loop_group_evidence(self.c, t.channels, part)
+            return evidence.loop_group_evidence(self.rows, t.channels, part)
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
         return evidence.part_evidence(real, sim, len(t.channels), part)
 
@@ -395,7 +397,7 @@ class TargetEvidence:
         level = {(k.sensors, k.condition): v for k, v in zip(self.target.real.keys,
                                                              self.target.real.estimate)
                  if k.family == 'closed_loop_level'}
-        return evidence.spread_cells(self.c, level, sensors, closed_loop)
+        return evidence.spread_cells(self.rows, level, sensors, closed_loop)
 
     def converter(self) -> dict[str, Any]:
         t = self.target
