@@ -96,7 +96,8 @@ def stock_controllers(seed: int, trials: int, ea: EAConfig = EA) -> np.ndarray:
 
 def measure(params: dict, stock: np.ndarray, seed: int, test_episodes: int = 10,
             ea: EAConfig = EA) -> dict:
-    """The three arms on one robot, their intervals and the verdict of the rule."""
+    """The arms on one robot (sim, stock, ceiling, scratch), their intervals and the
+    verdict of the rule."""
     trials = len(stock)
     index = int(params['drawn'].get('index', 0))
     unit = params['unit_seed']

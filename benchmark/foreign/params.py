@@ -65,6 +65,8 @@ def check(data, source: str = 'robot') -> dict:
     if not isinstance(data.get('unit_seed'), int) or isinstance(data.get('unit_seed'), bool) \
             or data['unit_seed'] < 0:
         fail('unit_seed', data.get('unit_seed'), 'an integer >= 0')
+    if not isinstance(data.get('drawn', {}), dict):
+        fail('drawn', data['drawn'], 'a mapping (generator, seed, index)')
     out = {'format': FORMAT, 'name': str(data.get('name', source)),
            'drawn': dict(data.get('drawn') or {}), 'unit_seed': int(data['unit_seed'])}
     for section in sorted(SECTIONS):
