@@ -84,11 +84,12 @@ class SaturationQuantization(Effect):
                     sensors = (set(grid) if use_grid else set()) | set(lost) | \
                         (set(low['sensors']) if use_low and low else set()) | \
                         (set(high['sensors']) if use_high and high else set())
-                    if sensors:
+                    low_value = low['value'] if use_low and low else 0.0
+                    high_value = high['value'] if use_high and high else top
+                    if sensors and low_value < high_value:
                         options.append(cls(
                             tuple(sorted(sensors)),
-                            low=low['value'] if use_low and low else 0.0,
-                            high=high['value'] if use_high and high else top,
+                            low=low_value, high=high_value,
                             step=float(step) if use_grid else 1.0,
                             origin=float(origin) if use_grid else 0.0, **drop))
         kinds = (STATIONARY,) if STATIONARY in evidence.kinds else None

@@ -422,12 +422,16 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
         x, y = real[:, sensor], sim[:, sensor]
         x, y = x[np.isfinite(x)], y[np.isfinite(y)]
         values, count = np.unique(x, return_counts=True)
-        if values.size < 2 or y.size == 0:
+        if values.size == 0 or y.size == 0:
             continue
-        for end, (value, at, inner) in enumerate(((values[0], count[0], count[1]),
-                                                  (values[-1], count[-1], count[-2]))):
-            if value == reading_range[end]:
+        ends = [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])] \
+            if values.size > 1 else [(values[0], count[0], 0)] * 2
+        if values.size == 1:      # held at one value: the limit on the side the simulator passes
+            ends[int(np.mean(y > values[0]) < np.mean(y < values[0]))] = None
+        for end, found_ in enumerate(ends):
+            if found_ is None or found_[0] == reading_range[end]:
                 continue
+            value, at, inner = found_
             beyond, held = (np.mean(y < value), np.mean(y <= value)) if end == 0 else \
                 (np.mean(y > value), np.mean(y >= value))
             out[end].setdefault(float(value), []).append(
@@ -455,6 +459,11 @@ def grid(x: Array) -> tuple[int, int]:
         if hist.max() >= 0.95 * x.size:
             return q, int(hist.argmax())
     return 1, 0
+
+
+def on_grid(x: Array, step: int, origin: int) -> float:
+    """The share of readings ``x`` on the lattice origin + k * step."""
+    return float(np.mean(np.mod(x - origin, step) == 0)) if x.size else 0.0
 
 
 def dropouts(real: Sequence[Any], sim: Sequence[Any]) -> dict[int, tuple[float, float]]:

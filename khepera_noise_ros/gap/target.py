@@ -407,15 +407,20 @@ class TargetEvidence:
         sim_x = np.concatenate([r.recording.readings for r in sim])
         bounds = reading_range(rec.manifest, rec.channels)
         grains = self.rows('granularity') or self.rows('loop_granularity')
+        timed = {r.key.sensors[0] for r in grains}
         flagged = {r.key.sensors[0] for r in grains if r.z > 4.0}
+        inner = {s: _inner(real_x[:, s]) for s in rec.channels_used}
+        pooled = converter.grid(np.concatenate(list(inner.values())))
         lattices = {}
         for sensor in rec.channels_used:
             x, y = real_x[:, sensor], sim_x[:, sensor]
-            x, y = x[np.isfinite(x)], y[np.isfinite(y)]
-            lattice = converter.grid(x[(x > x.min()) & (x < x.max())])
+            lattice = converter.grid(inner[sensor])
+            if lattice[0] == 1 and inner[sensor].size < 20 and pooled[0] > 1 and \
+                    converter.on_grid(x[np.isfinite(x)], *pooled) >= 0.95:
+                lattice = pooled      # too few values of its own: the other sensors' lattice
             # without granularity statistics: the simulator's readings off the real lattice
-            shown = sensor in flagged if grains else \
-                converter.grid(y[(y > y.min()) & (y < y.max())]) != lattice
+            shown = sensor in flagged if sensor in timed else \
+                converter.grid(_inner(y)) != lattice
             if lattice[0] > 1 and shown:
                 lattices[sensor] = lattice
         lost = converter.dropouts(t.real_data, sim)
@@ -439,3 +444,9 @@ class TargetEvidence:
             else t.of_kind('stationary')
         return [rec.readings[r][:, t.channels].astype(np.float64) for rec in recs
                 for r in runs(rec)]
+
+
+def _inner(x: Array) -> Array:
+    """The finite readings strictly between their least and greatest."""
+    x = x[np.isfinite(x)]
+    return x[(x > x.min()) & (x < x.max())] if x.size else x
