@@ -252,7 +252,8 @@ class Evidence(Protocol):
     def group_evidence(self, part: str) -> Array:
         """(C, C) z that each pair's 'fast' or 'slow' noise is shared beyond the simulator's."""
     def group_null(self, part: str) -> Array:
-        """The same z of simulated data against the simulator: the null for a stopping rule."""
+        """(draws, C, C) the same z of simulated stand-ins for the real data against the
+        simulator: the null a group search's stopping rule is checked against."""
     def own_wander(self) -> dict[int, dict[str, Any]]:
         """Sensors whose own part wanders more than simulated: {sensor: {z, sd, acf}}."""
     def shared_change(self) -> dict[str, Any] | None:

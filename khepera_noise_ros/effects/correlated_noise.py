@@ -13,10 +13,11 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy import stats as sps
 
 from ..core.khepera import DARK
 from .base import Array, Candidate, Effect, Evidence, Stage, Step, param, rows
-from .fitting import by_condition, names, refine
+from .fitting import ALPHA, by_condition, names, refine
 
 THRESHOLD = 4.0
 
@@ -92,9 +93,19 @@ class CorrelatedNoise(Effect):
         return Candidate(cls.name, effect, f'excess correlation clusters into {text}')
 
 
-def groups_of(evidence: Evidence, z: Array) -> list[list[int]]:
-    """Groups (positions in ``evidence.channels``) of the pair evidence ``z``."""
-    return cluster(z)
+def groups_of(evidence: Evidence, z: Array, part: str = 'fast') -> list[list[int]]:
+    """Groups (positions in ``evidence.channels``) of the pair evidence ``z``, merged while
+    the link exceeds what chance gives: the Bonferroni threshold over the pairs at
+    ``ALPHA``, scaled by how much wider than N(0, 1) the same evidence is between the
+    simulator and itself (``Evidence.group_null``), so that a chance pair is not put in
+    and a member that is plainly shared is not left out by a fixed threshold."""
+    c = z.shape[0]
+    if c < 2:
+        return []
+    null = evidence.group_null(part)
+    off = ~np.eye(c, dtype=bool)
+    spread = float(np.sqrt(np.mean(null[:, off] ** 2))) if null.size else 1.0
+    return cluster(z, max(1.0, spread) * float(sps.norm.isf(ALPHA / (c * (c - 1) / 2))))
 
 
 def cluster(evidence: Array, threshold: float = THRESHOLD) -> list[list[int]]:

@@ -36,6 +36,7 @@ SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
 SIM_SAMPLES = 20_000     # simulated samples aimed at when choosing the number of copies
 REPLAYS = 16             # replays remembered
+NULL_DRAWS, NULL_SEED = 2, 104729     # simulated stand-ins for the real data (group_null)
 
 
 @dataclass
@@ -67,6 +68,7 @@ class Memory:
     objectives: dict[tuple[Any, ...], float] = field(default_factory=dict)
     own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
+    nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
 
 
 class Target:
@@ -358,12 +360,16 @@ class TargetEvidence:
 
     def group_null(self, part: str) -> Array:
         t = self.target
-        if not t.of_kind('stationary'):
-            return np.zeros((len(t.channels),) * 2)
-        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-        other = [r.recording for r in t.with_seed(t.seed + 104729).simulate(
-            kinds=('stationary',), copies=1)]
-        return evidence.part_evidence(other, sim, len(t.channels), part)
+        if not t.of_kind('stationary'):         # the comparison's own z: standard already
+            return np.zeros((0, len(t.channels), len(t.channels)))
+        key = ('null', part, t.seed, t.config, t.given)
+        if key not in t.memory.nulls:
+            sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+            t.memory.nulls[key] = np.stack([evidence.part_evidence(
+                [r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
+                    kinds=('stationary',), copies=1, remember=False)], sim, len(t.channels), part)
+                for k in range(NULL_DRAWS)])
+        return t.memory.nulls[key]
 
     def own_wander(self) -> dict[int, dict[str, Any]]:
         t = self.target
