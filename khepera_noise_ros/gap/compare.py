@@ -34,8 +34,11 @@ CHANCE_MEAN, CHANCE_VAR, CHANCE_SDS = 0.011537, 0.012703, 3.0
 class Stats:
     """Values of many statistics: ``values`` is (R, K), row 0 the full-data estimate."""
 
-    keys: list[Key]
+    keys: tuple[Key, ...]
     values: Array
+
+    def __post_init__(self) -> None:
+        self.keys = tuple(self.keys)
 
     @property
     def estimate(self) -> Array:

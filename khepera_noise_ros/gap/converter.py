@@ -18,6 +18,7 @@ common residue modulo small steps (``granularity``, ``loop_granularity`` in clos
 """
 from __future__ import annotations
 
+import functools
 import warnings
 from collections import Counter
 from typing import Any, Sequence
@@ -68,14 +69,17 @@ def repair(x: Array, runs: list[np.ndarray], moving: bool = False) -> tuple[Arra
     xo = x[order].astype(np.float64)
     geometry = (run_of, first, sizes)
     todo = []                                      # (channel, end, positions at the extreme)
-    for k in range(x.shape[1]):
-        for end in (0, 1):
-            i = np.sort(place[np.flatnonzero(x[:, k] == ends[k, end])])
+    for end in (0, 1):
+        channel, sample = np.nonzero((x == ends[None, :, end]).T)    # channel by channel
+        bounds = np.searchsorted(channel, np.arange(x.shape[1] + 1))
+        for k in range(x.shape[1]):
+            i = np.sort(place[sample[bounds[k]:bounds[k + 1]]])
             i = i[i >= 0]
             if i.size and not (moving and _stretched(i, run_of)):
                 i = i[~_flanked(i, run_of)]
                 if i.size:
                     todo.append((k, end, i))
+    todo.sort(key=lambda t: t[0])
     if not todo:
         return x, marks, ends
     # the local tests for every channel at once; only what is left needs its run's scale
@@ -196,19 +200,12 @@ def _detached(col: Array, end: int) -> bool:
     x = col[np.isfinite(col)]
     x = x if end == 0 else -x
     low = x.min()
-    whole = np.all(x == np.round(x)) and x.max() - low < 1e5
-    counts = np.bincount((x - low).astype(np.int64)) if whole else None
-    rest = int(x.size - counts[0]) if counts is not None else int(np.count_nonzero(x > low))
-    m = min(rest, 64 * (SPACINGS + 1))           # the distinct values among the nearest m
-    at_low = counts[0] if counts is not None else np.count_nonzero(x == low)
-    if at_low < DETACHED_HITS or m < SPACINGS + 1:
+    rest = x[x > low]
+    if rest.size < SPACINGS + 1 or rest.min() - low < AWAY or \
+            np.count_nonzero(x == low) < DETACHED_HITS:
         return False
-    if counts is not None:        # whole readings: the same values from their counts
-        values = np.flatnonzero(counts)[1:]
-        inside = np.cumsum(counts[values]) - counts[values] < m
-        near = (values[inside][:SPACINGS + 1] + low).astype(np.float64)
-    else:
-        near = np.unique(np.partition(x[x > low], m - 1)[:m])[:SPACINGS + 1]
+    m = min(rest.size, 64 * (SPACINGS + 1))     # the distinct values among the nearest m
+    near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
     if near.size < 3:
         return False
     gap = near[0] - low
@@ -272,10 +269,17 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
         table[:, :, 2 + j] = residue[:, None] == modal[None, :]
     xo = xi[o]
     mode = per_cell.argmax(axis=2)                                     # (cells, C)
-    flags = table.reshape(span * c, -1)[(xo * c + channel).ravel()].reshape(len(o), -1)
-    sums = total(flags).reshape(-1, c, 2 + len(MODULI))
-    return {'edge': sums[:, :, :2], 'dropped': total(marks[o]),
-            'at_mode': total((xo == mode[cell[o]]).astype(np.float32)), 'residue': sums[:, :, 2:]}
+    if total.size == cells:       # whole cells: each one's histogram of the kept samples
+        kept = np.bincount(((cell[o][:, None] * c + channel) * span + xo).ravel(),
+                           minlength=cells * c * span).reshape(cells, c, span)
+        sums = np.stack([kept[:, k] @ table[:, k] for k in range(c)], axis=1)
+        at_mode = np.take_along_axis(kept, mode[:, :, None], axis=2)[:, :, 0].astype(float)
+    else:
+        flags = table.reshape(span * c, -1)[(xo * c + channel).ravel()].reshape(len(o), -1)
+        sums = total(flags).reshape(-1, c, 2 + len(MODULI))
+        at_mode = total((xo == mode[cell[o]]).astype(np.float32))
+    return {'edge': sums[:, :, :2], 'dropped': total(marks[o]), 'at_mode': at_mode,
+            'residue': sums[:, :, 2:]}
 
 
 def _piles_of(values: Array, counts: np.ndarray) -> tuple[float, float]:
@@ -289,35 +293,46 @@ def _piles_of(values: Array, counts: np.ndarray) -> tuple[float, float]:
 def stationary_stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
     n = b.part(s, 'n')[..., 0]
     total = n.sum(axis=1)[:, None]
-    ch = b.channels
-    keys = [Key('pileup', (k,), None, end) for k in ch for end in PILE_ENDS]
-    cols = [(b.part(s, 'edge').sum(axis=1) / total[..., None]).reshape(s.shape[0], -1)]
-    more_keys, more_cols = _shares('dropout', ch, None, b.part(s, 'dropped').sum(axis=1)
-                                   / total[..., None])
-    keys, cols = keys + more_keys, cols + more_cols
+    r, conditions = s.shape[0], tuple(dict.fromkeys(c for c, _ in b.strata))
+    cols = [(b.part(s, 'edge').sum(axis=1) / total[..., None]).reshape(r, -1)]
+    cols += _shares(b.channels, b.part(s, 'dropped').sum(axis=1) / total[..., None])
     if b.has('at_mode'):
-        for cond in dict.fromkeys(c for c, _ in b.strata):
+        for cond in conditions:
             m = [i for i, lab in enumerate(b.strata) if lab[0] == cond]
-            keys += [Key('mode_share', (k,), cond, None) for k in ch]
             cols.append(b.part(s, 'at_mode')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None])
-        keys += [Key('granularity', (k,), None, f'step {q}') for k in ch for q in MODULI]
-        cols.append((b.part(s, 'residue').sum(axis=1) / total[..., None]).reshape(s.shape[0], -1))
-    return keys, cols
+        cols.append((b.part(s, 'residue').sum(axis=1) / total[..., None]).reshape(r, -1))
+    return _stationary_keys(b.channels, conditions, b.has('at_mode')), cols
 
 
-def _shares(family: str, channels: Sequence[int], condition: str | None,
-            share: Array) -> tuple[list[Key], list[Array]]:
+@functools.lru_cache(maxsize=64)
+def _stationary_keys(ch: tuple[int, ...], conditions: tuple[str, ...],
+                     lattice: bool) -> list[Key]:
+    out = [Key('pileup', (k,), None, end) for k in ch for end in PILE_ENDS]
+    out += _share_keys('dropout', ch, None)
+    if lattice:
+        out += [Key('mode_share', (k,), cond, None) for cond in conditions for k in ch]
+        out += [Key('granularity', (k,), None, f'step {q}') for k in ch for q in MODULI]
+    return out
+
+
+def _shares(channels: Sequence[int], share: Array) -> list[Array]:
     """Dropout shares (R, C, 2) per sensor and end, and pooled over the sensors (a small
-    rate shared by many sensors shows there)."""
-    keys, cols = [], []
-    for j, end in enumerate(ENDS):
-        for k, sensor in enumerate(channels):
-            keys.append(Key(family, (sensor,), condition, end))
-            cols.append(share[:, k, j])
+    rate shared by many sensors shows there); keys ``_share_keys``."""
+    cols = []
+    for j in range(len(ENDS)):
+        cols.append(share[:, :, j])
         if len(channels) > 1:
-            keys.append(Key(family, tuple(channels), condition, end))
-            cols.append(share[:, :, j].mean(axis=1))
-    return keys, [np.stack(cols, axis=1)] if cols else []
+            cols.append(share[:, :, j].mean(axis=1)[:, None])
+    return cols
+
+
+def _share_keys(family: str, channels: tuple[int, ...], condition: str | None) -> list[Key]:
+    out = []
+    for end in ENDS:
+        out += [Key(family, (sensor,), condition, end) for sensor in channels]
+        if len(channels) > 1:
+            out.append(Key(family, channels, condition, end))
+    return out
 
 
 def loop_sums(x: Array, marks: Array, ep: np.ndarray, episodes: int,
@@ -356,8 +371,8 @@ def loop_stats(b: bootstrap.Blocks, s: Array, i: int,
                condition: str) -> tuple[list[Key], list[Array]]:
     """Stratum ``i``'s (one condition's) closed-loop converter statistics."""
     n = b.part(s, 'n')[:, i, 0]
-    keys, cols = _shares('closed_loop_dropout', tuple(range(8)), condition,
-                         b.part(s, 'dropped')[:, i] / n[:, None, None])
+    keys = list(_share_keys('closed_loop_dropout', tuple(range(8)), condition))
+    cols = _shares(range(8), b.part(s, 'dropped')[:, i] / n[:, None, None])
     if b.has('lv_weight'):
         weight = b.part(s, 'lv_weight')[:, i]
         share = b.part(s, 'lv_residue')[:, i] / weight[..., None]
@@ -385,8 +400,8 @@ def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
         for condition, rows in groups:
             hit = marks[rows].sum(axis=0)[list(channels)]
             n = float(np.count_nonzero(rows))
-            keys, cols = _shares(family, channels, condition, hit[None] / n)
-            for key, value in zip(keys, cols[0][0] if cols else []):
+            values = np.concatenate([c[0] for c in _shares(channels, hit[None] / n)])
+            for key, value in zip(_share_keys(family, channels, condition), values):
                 width = len(channels) if len(key.sensors) > 1 else 1
                 total = out.setdefault(key, [0.0, 0.0])
                 total[0] += float(value) * n * width

@@ -9,6 +9,7 @@ these facts reads ``FAMILIES``; a family missing from it is an error, not a defa
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 PARTS = ('stationary', 'closed_loop', 'closed_loop_noise', 'dropout', 'loop_values')
@@ -60,6 +61,7 @@ def of_part(part: str) -> frozenset[str]:
     return frozenset(n for n, f in FAMILIES.items() if f.part == part)
 
 
+@functools.cache
 def having(fact: str) -> frozenset[str]:
     """The families for which ``fact`` (limits, lattice, widened, counted) holds."""
     return frozenset(n for n, f in FAMILIES.items() if getattr(f, fact))

@@ -14,6 +14,7 @@ followed (0 at once, 1 while the sensor still reports the old heading).
 """
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -75,10 +76,24 @@ class Grouping:
         self.pick = sparse.csr_matrix((np.ones(group.size, np.float32),
                                        (group, np.arange(group.size))), shape=(size, group.size))
         self.count = np.bincount(group, minlength=size).astype(np.float64)[:, None]
+        first = np.flatnonzero(np.r_[True, np.diff(group) != 0]) if group.size else group
+        self.segments = [(int(g), slice(a, b)) for g, a, b in zip(
+            group[first], first, np.r_[first[1:], group.size])]
 
     def __call__(self, values: Array) -> Array:
         out: Array = np.asarray(self.pick @ values.reshape(values.shape[0], -1))
         return out.reshape((self.size,) + values.shape[1:])
+
+    def cross(self, y: Array) -> Array:
+        """(groups, C (C + 1) / 2) sums of the products y_k y_m, k <= m: a matrix product per
+        group where groups are few (whole strata), else the products summed."""
+        i, j = np.triu_indices(y.shape[1])
+        if len(self.segments) > 64:
+            return self(y[:, i] * y[:, j])
+        out = np.zeros((self.size, i.size), y.dtype)
+        for g, at in self.segments:
+            out[g] = (y[at].T @ y[at])[i, j]
+        return out
 
 
 class Layout:
@@ -116,21 +131,22 @@ class Layout:
         block_of[self.order] = block
         self.lags = _lag_pairs(rec.step[self.order], self.run_of[self.order])
         self.changes = _changes(rec, self.runs, block_of)
-        self.own_kept = (position >= SKIP).astype(np.float32)[:, None]
+        self.own_kept = np.zeros((len(rec), 1), np.float32)    # in sample order
+        self.own_kept[self.run_order, 0] = position >= SKIP
+        self.by_run = Grouping(self.run_of, len(self.runs), np.arange(len(self.runs)),
+                               np.arange(len(self.runs)))
 
 
 def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
     """Sums by ``total``'s groups of the statistics of readings ``x`` (N, C)."""
     c = x.shape[1]
-    run_mean = np.add.reduceat(x[lay.run_order], lay.run_starts, axis=0) \
-        / lay.run_sizes[:, None]
+    run_mean = lay.by_run(x) / lay.run_sizes[:, None]
     y = x - run_mean[lay.run_of]
     yo = y[lay.order]
     out = {'n': total.count, 'sx': total(x[lay.order]), 's1': total(yo)}
     # products in single precision (a block's few hundred samples keep 6 digits)
-    y32, own = yo.astype(np.float32), _own(y, lay)[lay.order].astype(np.float32)
-    i, j = np.triu_indices(c)
-    out.update({'s2': total(y32[:, i] * y32[:, j]), 's4': total(np.square(np.square(y32))),
+    y32, own = yo.astype(np.float32), _own(y, lay)[lay.order]
+    out.update({'s2': total.cross(y32), 's4': total(np.square(np.square(y32))),
                 'own_s2': total(own * own)})
     for name, v in (('lag_s', y32), ('own_lag_s', own)):
         out[name] = np.stack([total(_lagged(v, hit, partner, lag))
@@ -166,18 +182,16 @@ def _own(y: Array, lay: Layout) -> Array:
     c = y.shape[1]
     if c < MIN_OWN:
         return np.zeros_like(y)
-    yr = (y[lay.run_order] * lay.own_kept).astype(np.float32)
-    others = (yr.sum(axis=1, keepdims=True) - yr) / (c - 1)
-    cross = np.add.reduceat(yr * others, lay.run_starts, axis=0)
-    square = np.add.reduceat(others * others, lay.run_starts, axis=0)
+    yr = y.astype(np.float32) * lay.own_kept
+    others = (yr.sum(axis=1, keepdims=True) - yr) * np.float32(1.0 / (c - 1))
+    cross, square = lay.by_run(yr * others), lay.by_run(others * others)
     beta = np.divide(cross, square, out=np.zeros_like(cross), where=square > 0)
-    out = np.empty_like(yr)
-    out[lay.run_order] = yr - np.repeat(beta, lay.run_sizes, axis=0) * others
+    out: Array = yr - beta.astype(np.float32)[lay.run_of] * others
     return out
 
 
 def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
-    """(keys, (R,) columns) from the resampled (R, S, D) sums."""
+    """(keys, (R, k) columns) from the resampled (R, S, D) sums."""
     n = b.part(s, 'n')[..., 0]
     s1, c = b.part(s, 's1'), len(b.channels)
     i, j = np.triu_indices(c)
@@ -186,14 +200,9 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
     centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
     level = b.part(s, 'sx') / n[..., None]
     cell_sd = np.sqrt(np.diagonal(centred, axis1=-2, axis2=-1) / (n[..., None] - 1))
-    conditions = list(dict.fromkeys(cond for cond, _ in b.strata))
-    ch, r = b.channels, s.shape[0]
-    keys: list[Key] = []
+    conditions = tuple(dict.fromkeys(cond for cond, _ in b.strata))
+    r = s.shape[0]
     cols = [np.stack([level, cell_sd], axis=3).reshape(r, -1)]
-    for cond, h in b.strata:
-        part = None if h is None else f'heading {h:g} deg'
-        for sensor in ch:
-            keys += [Key('level', (sensor,), cond, part), Key('spread', (sensor,), cond, part)]
     pairs = np.triu_indices(c, 1)
     for cond in conditions:
         m = [i for i, lab in enumerate(b.strata) if lab[0] == cond]
@@ -201,32 +210,45 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
         cov = centred[:, m].sum(axis=1) / dof[:, None, None]
         var = np.diagonal(cov, axis1=-2, axis2=-1)
         sd = np.sqrt(var)
-        corr = cov / (sd[:, :, None] * sd[:, None, :])
-        acf = b.part(s, 'lag_s')[:, m].sum(axis=1) \
-            / b.part(s, 'lag_n')[:, m].sum(axis=1)[..., None] / var[:, None, :]
-        kurt = b.part(s, 's4')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None] / var ** 2 - 3.0
-        cols += [corr[:, pairs[0], pairs[1]], acf.reshape(r, -1), kurt]
-        keys += [Key('correlation', (ch[i], ch[j]), cond, None) for i, j in zip(*pairs)]
-        keys += [Key('autocorrelation', (k,), cond, f'lag {lag}') for lag in LAGS for k in ch]
-        keys += [Key('kurtosis', (k,), cond, None) for k in ch]
+        cols.append((cov / (sd[:, :, None] * sd[:, None, :]))[:, pairs[0], pairs[1]])
+        cols.append((b.part(s, 'lag_s')[:, m].sum(axis=1) / b.part(s, 'lag_n')[:, m].sum(
+            axis=1)[..., None] / var[:, None, :]).reshape(r, -1))
+        cols.append(b.part(s, 's4')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None] / var ** 2
+                    - 3.0)
         if c >= MIN_OWN:
-            own = b.part(s, 'own_lag_s')[:, m].sum(axis=1) \
-                / b.part(s, 'own_s2')[:, m].sum(axis=1)[:, None, :]
-            cols.append(own.reshape(r, -1))
-            keys += [Key('own_autocorrelation', (k,), cond, f'lag {lag}')
-                     for lag in LAGS for k in ch]
+            cols.append((b.part(s, 'own_lag_s')[:, m].sum(axis=1) / b.part(s, 'own_s2')[
+                :, m].sum(axis=1)[:, None, :]).reshape(r, -1))
     dl = level - level.mean(axis=1, keepdims=True)
     ds = cell_sd - cell_sd.mean(axis=1, keepdims=True)
     cols.append((dl * ds).sum(axis=1) / (dl * dl).sum(axis=1))
-    keys += [Key('spread_vs_level', (k,), None, None) for k in ch]
     d2 = b.part(s, 'step_d2').sum(axis=1)                             # (R, J, C)
+    timed: tuple[bool, ...] = ()
     if (d2[0] > 0).any():
         response = b.part(s, 'step_dd').sum(axis=1) / d2
-        timed = d2[0, 0] >= 100.0 * STEP_LAGS          # changes too small to time: left out
-        cols.append(response[:, :, timed].transpose(0, 2, 1).reshape(r, -1))
-        keys += [Key('step_response', (k,), None, f'sample {j} after a change')
-                 for k, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
-    return keys, cols
+        ok = d2[0, 0] >= 100.0 * STEP_LAGS              # changes too small to time: left out
+        cols.append(response[:, :, ok].transpose(0, 2, 1).reshape(r, -1))
+        timed = tuple(bool(v) for v in ok)
+    return keys(tuple(b.strata), b.channels, timed), cols
+
+
+@functools.lru_cache(maxsize=64)
+def keys(strata: tuple[tuple[str, float | None], ...], ch: tuple[int, ...],
+         timed: tuple[bool, ...]) -> list[Key]:
+    """The keys of ``stats``, in its column order: the same for every replay of a protocol
+    (a shared list: never modify it)."""
+    out = [Key(family, (k,), cond, None if h is None else f'heading {h:g} deg')
+           for cond, h in strata for k in ch for family in ('level', 'spread')]
+    pairs = [(ch[i], ch[j]) for i in range(len(ch)) for j in range(i + 1, len(ch))]
+    for cond in dict.fromkeys(cond for cond, _ in strata):
+        out += [Key('correlation', p, cond, None) for p in pairs]
+        out += [Key('autocorrelation', (k,), cond, f'lag {lag}') for lag in LAGS for k in ch]
+        out += [Key('kurtosis', (k,), cond, None) for k in ch]
+        if len(ch) >= MIN_OWN:
+            out += [Key('own_autocorrelation', (k,), cond, f'lag {lag}') for lag in LAGS
+                    for k in ch]
+    out += [Key('spread_vs_level', (k,), None, None) for k in ch]
+    return out + [Key('step_response', (k,), None, f'sample {j} after a change')
+                  for k, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
 
 
 def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:

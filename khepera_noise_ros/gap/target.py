@@ -69,6 +69,7 @@ class Memory:
     own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
+    pairs: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
 
 
 class Target:
@@ -282,15 +283,17 @@ class Target:
         n = sum(len(r) for r in self.recordings)
         copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
-        only = having('limits')
-        pairs = [(i, sim.index[k]) for i, k in enumerate(real.keys) if k in sim.index and (
-            k.family in families if families is not None else limits or k.family not in only)]
-        if not pairs:
-            return 0.0
-        ri, si = (np.array(p, np.int64) for p in zip(*pairs))
+        key = (real.keys, sim.keys, families, limits)
+        if key not in self.memory.pairs:        # the same for every replay of the protocol
+            only = having('limits')
+            pairs = [(i, sim.index[k]) for i, k in enumerate(real.keys) if k in sim.index and (
+                k.family in families if families is not None else limits or k.family not in only)]
+            ri, si = (np.array(p, np.int64) for p in zip(*pairs)) if pairs else \
+                (np.zeros(0, np.int64),) * 2
+            self.memory.pairs[key] = ri, si, floors([real.keys[i] for i in ri])
+        ri, si, floor = self.memory.pairs[key]
         d = real.estimate[ri] - sim.estimate[si]
-        se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies)
-                     + floors([real.keys[i] for i in ri]))
+        se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies) + floor)
         ok = np.isfinite(d) & np.isfinite(se)
         return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
 
