@@ -51,35 +51,40 @@ COUNT_SAMPLES, MAX_COPIES, KNOWN, EVENTS = 48_000, 20, 20, 2
 
 # -- dropouts ------------------------------------------------------------------------------
 
-def repair(x: Array, runs: list[np.ndarray], moving: bool = False) -> tuple[Array, Array, Array]:
+class Runs:
+    """The runs a dropout is judged in (those of 3 samples or more): the samples run by
+    run (``order``), each position's run, each run's first position and size, and each
+    sample's position (-1: in no such run).  The same for every replay of a protocol."""
+
+    def __init__(self, runs: list[np.ndarray], samples: int):
+        kept = [r for r in runs if r.size >= 3]
+        self.order = np.concatenate(kept) if kept else np.zeros(0, np.int64)
+        self.sizes = np.array([r.size for r in kept], np.int64)
+        self.first = np.cumsum(np.r_[0, self.sizes[:-1]]).astype(np.int64)
+        self.run_of = np.repeat(np.arange(len(kept)), self.sizes)
+        self.place = np.full(samples, -1)
+        self.place[self.order] = np.arange(self.order.size)
+
+
+def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, Array, Array]:
     """(``x`` with each dropout read as a neighbour's level, (N, C, 2) marks at the lowest
-    and highest value, (C, 2) each channel's extremes); ``runs``: sample indices of each
-    run in step order; ``moving``: the light moves within a run (closed loop)."""
+    and highest value, (C, 2) each channel's extremes); ``moving``: the light moves within
+    a run (closed loop)."""
     marks = np.zeros(x.shape + (2,), np.float32)
-    ends = _extremes(x)
-    kept = [r for r in runs if r.size >= 3]
-    if not kept or x.size == 0:
+    xt = np.ascontiguousarray(x.T)        # channel by channel: far faster than by column
+    ends = _extremes(xt)
+    if not runs.order.size or x.size == 0:
         return x, marks, ends
-    order = np.concatenate(kept)
-    sizes = np.array([r.size for r in kept])
-    first = np.cumsum(np.r_[0, sizes[:-1]])
-    run_of = np.repeat(np.arange(len(kept)), sizes)
-    place = np.full(x.shape[0], -1)
-    place[order] = np.arange(order.size)
-    xo = x[order].astype(np.float64)
-    geometry = (run_of, first, sizes)
+    xo = xt[:, runs.order].astype(np.float64)
     todo = []                                      # (channel, end, positions at the extreme)
-    for end in (0, 1):
-        channel, sample = np.nonzero((x == ends[None, :, end]).T)    # channel by channel
-        bounds = np.searchsorted(channel, np.arange(x.shape[1] + 1))
-        for k in range(x.shape[1]):
-            i = np.sort(place[sample[bounds[k]:bounds[k + 1]]])
+    for k in range(x.shape[1]):
+        for end in (0, 1):
+            i = np.sort(runs.place[np.flatnonzero(xt[k] == ends[k, end])])
             i = i[i >= 0]
-            if i.size and not (moving and _stretched(i, run_of)):
-                i = i[~_flanked(i, run_of)]
+            if i.size and not (moving and _stretched(i, runs.run_of)):
+                i = i[~_flanked(i, runs.run_of)]
                 if i.size:
                     todo.append((k, end, i))
-    todo.sort(key=lambda t: t[0])
     if not todo:
         return x, marks, ends
     # the local tests for every channel at once; only what is left needs its run's scale
@@ -88,39 +93,39 @@ def repair(x: Array, runs: list[np.ndarray], moving: bool = False) -> tuple[Arra
     cuts = np.cumsum([i.size for *_, i in todo])[:-1]
     repaired, deviations = x, {}
     for (k, end, i), far, lower, d, alone in zip(todo, *(np.split(v, cuts) for v in _local(
-            xo, at, channel, geometry))):
-        if (alone & ~far).any() and _detached(x[:, k], end):
+            xo, at, channel, runs))):
+        if (alone & ~far).any() and _detached(xt[k], end):
             far = alone           # beyond the noise's reach: isolated and away suffices
         elif far.any():
             if k not in deviations:
-                dev = np.abs(xo[:, k] - _median4(xo[:, k], _neighbours(geometry, NEAR)))
+                dev = np.abs(xo[k] - _median4(xo[k], _neighbours(runs, NEAR)))
                 deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
-            scale = _scales(deviations[k], geometry, np.unique(run_of[i[far]]))
-            far[far] = d[far] >= SPREADS * scale[run_of[i[far]]]
+            scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[far]]))
+            far[far] = d[far] >= SPREADS * scale[runs.run_of[i[far]]]
         if far.any():
             if repaired is x:
                 repaired = x.copy()
-            marks[order[i[far]], k, end] = 1.0
-            repaired[order[i[far]], k] = lower[far]
+            marks[runs.order[i[far]], k, end] = 1.0
+            repaired[runs.order[i[far]], k] = lower[far]
     return repaired, marks, ends
 
 
-def _extremes(x: Array) -> Array:
-    """(C, 2) each channel's least and greatest finite value (NaN where it has none)."""
-    if not np.isnan(x).any():
-        return np.stack([x.min(axis=0), x.max(axis=0)], axis=1)
+def _extremes(xt: Array) -> Array:
+    """(C, 2) each channel's (row's) least and greatest finite value (NaN where none)."""
+    if not np.isnan(xt).any():
+        return np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1)
     with np.errstate(invalid='ignore'), warnings.catch_warnings():
         warnings.simplefilter('ignore', RuntimeWarning)         # a channel all NaN
-        return np.stack([np.nanmin(x, axis=0), np.nanmax(x, axis=0)], axis=1)
+        return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1)
 
 
-def _local(xo: Array, i: np.ndarray, k: np.ndarray,
-           geometry: tuple[np.ndarray, ...]) -> tuple[Array, ...]:
+def _local(xo: Array, i: np.ndarray, k: np.ndarray, runs: Runs) -> tuple[Array, ...]:
     """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
-    readings at positions ``i`` of channels ``k``: far from the median of their neighbours
-    (those at the same value left out), then from a quick robust sd of the ``WINDOW``."""
-    value = xo[i, k]
-    around = xo[_neighbours(geometry, NEAR, i), k]
+    readings at positions ``i`` of channels ``k`` (``xo``: channel by channel, run by run):
+    far from the median of their neighbours (those at the same value left out), then from
+    a quick robust sd of the ``WINDOW``."""
+    value = xo[k, i]
+    around = xo[k, _neighbours(runs, NEAR, i)]
     around = np.where(around == value[None, :], np.nan, around)
     count = np.isfinite(around).sum(axis=0)
     kept = np.sort(around, axis=0)                              # NaN sorts last
@@ -134,18 +139,17 @@ def _local(xo: Array, i: np.ndarray, k: np.ndarray,
         alone = (count >= ISOLATED) & (d >= AWAY)
         far = alone & (d >= STEADY * rough)
     if far.any():
-        near = xo[_neighbours(geometry, WINDOW, i[far]), k[far]]
+        near = xo[k[far], _neighbours(runs, WINDOW, i[far])]
         spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
         far[far] = d[far] >= QUICK * SPREADS * spread
     return far, lower, d, alone
 
 
-def _neighbours(geometry: tuple[np.ndarray, ...], offsets: tuple[int, ...],
+def _neighbours(runs: Runs, offsets: tuple[int, ...],
                 at: np.ndarray | None = None) -> np.ndarray:
     """(len(offsets), N) positions of each position's neighbours in its run (reflected)."""
-    run_of, first, sizes = geometry
-    at = np.arange(run_of.size) if at is None else at
-    start, n = first[run_of[at]], sizes[run_of[at]]
+    at = np.arange(runs.run_of.size) if at is None else at
+    start, n = runs.first[runs.run_of[at]], runs.sizes[runs.run_of[at]]
     j = (at - start)[None, :] + np.array(offsets)[:, None]
     j = np.where(j < 0, -j, j)
     j = np.where(j >= n, 2 * (n - 1) - j, j)
@@ -160,13 +164,12 @@ def _median4(col: Array, neighbours: np.ndarray) -> Array:
     return out
 
 
-def _scales(deviations: Array, geometry: tuple[np.ndarray, ...], wanted: np.ndarray) -> Array:
+def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
     """Per run (the ``wanted`` ones; others inf): 1.4826 x the median deviation of its
     readings from their local levels."""
-    run_of, first, sizes = geometry
-    out = np.full(sizes.size, np.inf)
+    out = np.full(runs.sizes.size, np.inf)
     for r in wanted:
-        out[r] = 1.4826 * np.median(deviations[first[r]:first[r] + sizes[r]])
+        out[r] = 1.4826 * np.median(deviations[runs.first[r]:runs.first[r] + runs.sizes[r]])
     return out
 
 

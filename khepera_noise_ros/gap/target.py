@@ -49,9 +49,11 @@ class Repaired:
     kind: str
 
     @staticmethod
-    def of(rec: Recording) -> 'Repaired':
+    def of(rec: Recording, runs: converter.Runs | None = None) -> 'Repaired':
+        """``rec`` repaired (``runs``: its episodes' geometry, if known)."""
         k = kind(rec)
-        readings, marks, ends = converter.repair(rec.readings, episodes(rec), k == 'closed_loop')
+        runs = runs if runs is not None else converter.Runs(episodes(rec), len(rec))
+        readings, marks, ends = converter.repair(rec.readings, runs, k == 'closed_loop')
         if readings is not rec.readings:
             rec = dataclasses.replace(rec, readings=readings)
         return Repaired(rec, marks, ends, k)
@@ -70,6 +72,7 @@ class Memory:
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     pairs: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
+    runs: dict[tuple[int, int], converter.Runs] = field(default_factory=dict)
 
 
 class Target:
@@ -135,8 +138,10 @@ class Target:
             memo = self.memory.replays
             hit = memo.get(key) if remember else None
             if hit is None:
-                replayer = self._replayer(i)
-                hit = Repaired.of(replayer.replay(effects, self.seed + 7919 * i, copies))
+                sim = self._replayer(i).replay(effects, self.seed + 7919 * i, copies)
+                if (i, copies) not in self.memory.runs:       # the same for every replay
+                    self.memory.runs[(i, copies)] = converter.Runs(episodes(sim), len(sim))
+                hit = Repaired.of(sim, self.memory.runs[(i, copies)])
                 hit.recording.readings.flags.writeable = False
                 if remember:
                     memo[key] = hit
