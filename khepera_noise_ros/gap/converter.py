@@ -76,37 +76,42 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, Array, Ar
     if not runs.order.size or x.size == 0:
         return x, marks, ends
     xo = xt[:, runs.order].astype(np.float64)
-    todo = []                                      # (channel, end, positions at the extreme)
-    for k in range(x.shape[1]):
-        for end in (0, 1):
-            i = np.sort(runs.place[np.flatnonzero(xt[k] == ends[k, end])])
-            i = i[i >= 0]
-            if i.size and not (moving and _stretched(i, runs.run_of)):
-                i = i[~_flanked(i, runs.run_of)]
-                if i.size:
-                    todo.append((k, end, i))
-    if not todo:
+    # every channel's readings at its extremes, position by position within (channel, end)
+    found = [(2 * k + end, runs.place[np.flatnonzero(xt[k] == ends[k, end])])
+             for k in range(x.shape[1]) for end in (0, 1)]
+    group = np.concatenate([np.full(i.size, g) for g, i in found])
+    at = np.concatenate([i for _, i in found])
+    keep = at >= 0
+    group, at = group[keep], at[keep]
+    order = np.lexsort((at, group))
+    group, at = group[order], at[order]
+    if moving:             # a value held for stretches is a limit the light reaches
+        held = {int(g) for g in np.unique(group) if _stretched(at[group == g], runs.run_of)}
+        keep = ~np.isin(group, list(held))
+        group, at = group[keep], at[keep]
+    keep = ~_flanked(at, runs.run_of, group)
+    group, at = group[keep], at[keep]
+    if not at.size:
         return x, marks, ends
-    # the local tests for every channel at once; only what is left needs its run's scale
-    at = np.concatenate([i for *_, i in todo])
-    channel = np.concatenate([np.full(i.size, k) for k, _, i in todo])
-    cuts = np.cumsum([i.size for *_, i in todo])[:-1]
+    far, lower, d, alone = _local(xo, at, group // 2, runs)
     repaired, deviations = x, {}
-    for (k, end, i), far, lower, d, alone in zip(todo, *(np.split(v, cuts) for v in _local(
-            xo, at, channel, runs))):
-        if (alone & ~far).any() and _detached(xt[k], end):
-            far = alone           # beyond the noise's reach: isolated and away suffices
-        elif far.any():
+    for g in np.unique(group[far | alone]):
+        mine = group == g
+        k, end = divmod(int(g), 2)
+        i, f, low, dist, apart = at[mine], far[mine], lower[mine], d[mine], alone[mine]
+        if (apart & ~f).any() and _detached(xt[k], end):
+            f = apart             # beyond the noise's reach: isolated and away suffices
+        elif f.any():
             if k not in deviations:
                 dev = np.abs(xo[k] - _median4(xo[k], _neighbours(runs, NEAR)))
                 deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
-            scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[far]]))
-            far[far] = d[far] >= SPREADS * scale[runs.run_of[i[far]]]
-        if far.any():
+            scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[f]]))
+            f[f] = dist[f] >= SPREADS * scale[runs.run_of[i[f]]]
+        if f.any():
             if repaired is x:
                 repaired = x.copy()
-            marks[runs.order[i[far]], k, end] = 1.0
-            repaired[runs.order[i[far]], k] = lower[far]
+            marks[runs.order[i[f]], k, end] = 1.0
+            repaired[runs.order[i[f]], k] = low[f]
     return repaired, marks, ends
 
 
@@ -173,8 +178,10 @@ def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
     return out
 
 
-def _adjacent(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
-    return (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
+    """Are positions ``i[j]`` and ``i[j + 1]`` consecutive samples of one run (and group)?"""
+    out = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    return out if group is None else out & (group[1:] == group[:-1])
 
 
 def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
@@ -187,9 +194,9 @@ def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
     return bool(beside.sum() > STRETCHED * i.size)
 
 
-def _flanked(i: np.ndarray, run_of: np.ndarray) -> np.ndarray:
+def _flanked(i: np.ndarray, run_of: np.ndarray, group: np.ndarray) -> np.ndarray:
     """Readings whose two neighbours in the run are at the value too: never isolated."""
-    pair = _adjacent(i, run_of)
+    pair = _adjacent(i, run_of, group)
     both = np.zeros(i.size, bool)
     both[1:-1] = pair[:-1] & pair[1:]
     return both
@@ -257,8 +264,13 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
     xi = (x - low).astype(np.int64)
     span, cells = int(xi.max()) + 1, int(cell.max()) + 1
     channel = np.arange(c)[None, :]
-    per_cell = np.bincount(((cell[:, None] * c + channel) * span + xi).ravel(),
-                           minlength=cells * c * span).reshape(cells, c, span)
+    code = (cell[:, None] * c + channel) * span + xi                   # (cell, channel, value)
+    size = cells * c * span
+    kept = np.bincount(code[o].ravel(), minlength=size)
+    rest = np.ones(len(x), bool)
+    rest[o] = False              # the few samples no block keeps count for the cell's mode
+    per_cell = (kept + np.bincount(code[rest].ravel(), minlength=size)).reshape(cells, c, span)
+    kept = kept.reshape(cells, c, span)
     hist = per_cell.sum(axis=0)                                        # (C, span)
     values = np.arange(span) + low
     table = np.zeros((span, c, 2 + len(MODULI)), np.float32)           # per value: ends, lattice
@@ -273,8 +285,6 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
     xo = xi[o]
     mode = per_cell.argmax(axis=2)                                     # (cells, C)
     if total.size == cells:       # whole cells: each one's histogram of the kept samples
-        kept = np.bincount(((cell[o][:, None] * c + channel) * span + xo).ravel(),
-                           minlength=cells * c * span).reshape(cells, c, span)
         sums = np.stack([kept[:, k] @ table[:, k] for k in range(c)], axis=1)
         at_mode = np.take_along_axis(kept, mode[:, :, None], axis=2)[:, :, 0].astype(float)
     else:
