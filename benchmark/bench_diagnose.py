@@ -29,7 +29,7 @@ from blind_gap import REPEATS, SAMPLES, STATIONARY, record_stationary, robot  # 
 
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.gap import diagnose  # noqa: E402
-from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
 
 LONG_SAMPLES = 36_000

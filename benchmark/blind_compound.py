@@ -2,7 +2,7 @@
 
     python benchmark/blind_compound.py [--cases 24] [--seed 0] [--jobs 1] [--cache DIR]
                                        [--hard [--loop-only [--tracked]] [--shape S]]
-                                       [--only K ...] [--no-part-rule] [--out FILE.json]
+                                       [--only K ...] [--out FILE.json]
 
 Each case sets 2-4 effects of the emulated robot (``reality`` effects) at once, each
 at a random location and strength drawn as ``blind_gap.py`` draws a single one; every
@@ -19,7 +19,7 @@ change to the diagnosis is measured on the same data.  ``--hard`` draws the case
 ``--loop-only`` records those cases closed-loop only (``hard_compound.loop_only``),
 ``--tracked`` with the headings kept in every case (20 episodes);
 ``--shape`` draws one sensor shape in every case (a small part beside the loop effect).
-``--no-part-rule`` judges the steps as before ``gap/partstep.py``.
+
 """
 from __future__ import annotations
 
@@ -41,12 +41,12 @@ import numpy as np  # noqa: E402
 import blind_gap  # noqa: E402
 import hard_compound  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
-from khepera_noise_ros.gap import compound, diagnose  # noqa: E402
-from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.gap import diagnose  # noqa: E402
+from khepera_noise_ros.gap.families import PARTS  # noqa: E402
+from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 
 LOOP = ('actuator_turn_error', 'sensor_latency')
-PARTS = compound.PARTS   # stationary, closed loop, its noise, dropouts, loop values
 
 
 def draw_compound(rng, k: int) -> tuple[list, emu.EffectsConfig, dict]:
@@ -95,7 +95,7 @@ def _recordings(k: int, rng, genome, cache: Path | None, hard: bool = False,
 
 
 def _parts(c) -> dict:
-    return {p: round(compound._part(c, p), 1) for p in PARTS} if c is not None else {}
+    return {p: round(c.part(p).discrepancy, 1) for p in PARTS} if c is not None else {}
 
 
 def diagnose_case(job) -> dict:
@@ -178,15 +178,12 @@ def main(argv=None) -> int:
     p.add_argument('--shape', choices=hard_compound.SHAPES, default=None,
                    help='with --hard: this sensor shape in every case (e.g. dropout beside '
                         'the loop effect)')
-    p.add_argument('--no-part-rule', action='store_true',
-                   help='judge steps without the one-part rule (compound.PART_RULE off)')
     p.add_argument('--out', type=Path, default=None, help='write the per-case results here')
     args = p.parse_args(argv)
     if (args.loop_only or args.shape) and not args.hard:
         p.error('--loop-only and --shape need --hard')
     if args.tracked and not args.loop_only:
         p.error('--tracked needs --loop-only')
-    compound.PART_RULE = not args.no_part_rule
     if args.jobs < 1:
         p.error(f'--jobs must be >= 1, got {args.jobs}')
     if args.cache is not None:

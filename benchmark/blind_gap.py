@@ -36,10 +36,11 @@ from khepera_noise_ros.core import evolution, network  # noqa: E402
 from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
-from khepera_noise_ros.gap import diagnose, transfer  # noqa: E402
+from khepera_noise_ros.experiment import transfer  # noqa: E402
+from khepera_noise_ros.gap import diagnose  # noqa: E402
 from khepera_noise_ros.effects import VOCABULARY  # noqa: E402
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
-from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 from khepera_noise_ros.reality.effects.config import SENSOR_DRAWS  # noqa: E402
 from khepera_noise_ros.reality.effects.processes import SensorNoise  # noqa: E402

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 import blind_gap  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.gap import diagnose  # noqa: E402
-from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
 
 LOOPS = {'none': (), 'latency': ('sensor_latency',), 'turn': ('actuator_turn_error',)}

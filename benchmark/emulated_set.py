@@ -42,9 +42,10 @@ from blind_gap import STATIONARY, record_closed_loop, record_stationary, robot  
 from test_gap_support import GENOME  # noqa: E402
 
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
-from khepera_noise_ros.gap import compound, diagnose, split  # noqa: E402
-from khepera_noise_ros.gap import effects as fx  # noqa: E402
-from khepera_noise_ros.gap.simconfig import SimConfig  # noqa: E402
+from khepera_noise_ros import effects as fx  # noqa: E402
+from khepera_noise_ros.gap import diagnose, select, split  # noqa: E402
+from khepera_noise_ros.gap.compare import paired_p  # noqa: E402
+from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.gap.target import Target  # noqa: E402
 from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
 
@@ -123,9 +124,9 @@ def oracle(config, recs, sim_seeds: int = 1) -> None:
         for name in true:
             rest = b.compare([e for n, e in true.items() if n != name])
             reps = b.replicate_discrepancies(rest)
-            p = compound.paired_p(reps, all_reps, rest.discrepancy, d_all)
-            closed = (compound._part(rest, 'closed_loop')
-                      - compound._part(all_cmp, 'closed_loop'))
+            p = paired_p(reps, all_reps, rest.discrepancy, d_all)
+            closed = (rest.part('closed_loop').discrepancy
+                      - all_cmp.part('closed_loop').discrepancy)
             rows[name].append((rest.discrepancy - d_all, (rest.discrepancy - d_all) / d_all,
                                p, closed, (rest.discrepancy - d_all) / d0))
         if seed == 0:
@@ -160,7 +161,6 @@ def effect_alone(config, name: str, samples: int, sim_seeds: int = 1,
 
 def refit(config, name: str, samples: int, seed: int = 3) -> None:
     """``name`` fitted given the robot's other effects, true, one more at a time."""
-    from khepera_noise_ros.gap import fit
     recs = recordings(config, seed, samples, 2)[:1]
     a, _ = parts(recs, config)
     true = true_effects(config)
@@ -168,7 +168,7 @@ def refit(config, name: str, samples: int, seed: int = 3) -> None:
                           'temporal_drift', 'intensity_dependent_noise') if n != name]
     for k in range(len(others) + 1):
         given = a.with_given([true[n] for n in others[:k]])
-        cand = fit.fit_one(name, given, given.compare(replicates=40))
+        cand = select.fit_one(name, given, given.compare(replicates=40))
         print(f'  {name} given {others[:k] or "nothing"}: {cand.effect} ({cand.note})')
     print(f'  the robot\'s: {true[name]}')
 

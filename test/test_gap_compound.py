@@ -8,7 +8,7 @@ import pytest
 
 from khepera_noise_ros.gap import diagnose, fit, remainder, replay
 from khepera_noise_ros.gap import effects as fx
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.gap.target import Target
 from test_gap_support import CONFIG, recorded, stationary_protocol
 

@@ -12,7 +12,7 @@ import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.gap import compound, diagnose
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmark'))
 from blind_gap import STATIONARY, record_stationary, robot  # noqa: E402

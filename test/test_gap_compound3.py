@@ -14,7 +14,7 @@ import numpy as np
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.gap import compound, diagnose
 from khepera_noise_ros.gap import effects as fx
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.gap.statistics import Key
 from khepera_noise_ros.gap.where import Comparison
 

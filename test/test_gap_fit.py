@@ -4,7 +4,7 @@ import pytest
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.gap import effects as fx
 from khepera_noise_ros.gap import noisefit
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from test_gap_support import recorded, stationary_protocol
 
 

@@ -15,7 +15,7 @@ from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task
 from khepera_noise_ros.gap import diagnose, report, rounding, simconfig
 from khepera_noise_ros.gap import effects as fx
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.gap.simulate import EffectEpisodes, stationary
 from khepera_noise_ros.gap.target import Target
 from test_gap_support import CONFIG, recorded, stationary_protocol

@@ -15,7 +15,7 @@ import pytest
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.gap import diagnose, replay, split, timesig
 from khepera_noise_ros.gap import effects as fx
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.reality import effects as emu
 
 CONFIG = SimConfig(noise=NoiseModel.independent_only(0.02))

@@ -9,7 +9,7 @@ import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.gap import replay, statistics, where
-from khepera_noise_ros.gap.simconfig import SimConfig
+from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.recording import FORMAT, Recording
 
 CONDITIONS = {'task': {'lamp_distance_mm': 5.0, 'ambient': 500.0},

@@ -17,7 +17,9 @@ import numpy as np
 
 from ..core import evolution
 from ..effects import NAMES
-from ..gap import diagnose, report, simconfig, transfer
+from .. import simconfig
+from ..experiment import transfer
+from ..gap import diagnose, report
 from ..gap.protocol import BASES, condition_world, kind
 from ..recording import load
 

@@ -19,7 +19,8 @@ from pathlib import Path
 from ..core.khepera import SENSORS
 from ..core.noise import format_groups
 from ..files import write_json
-from ..gap import noisefit, simconfig
+from .. import simconfig
+from ..experiment import noisefit
 from ..recording import load
 
 HELP = 'fit the combination noise model to a stationary recording; write simulator params'

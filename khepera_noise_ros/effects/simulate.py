@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections import OrderedDict
 from typing import Any, Sequence
 
 import numpy as np
@@ -152,7 +151,7 @@ def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), s
     across simulations of one protocol (the same numbers)."""
     cache = cache if cache is not None else SimCache()
     samples, channels, robots = base.shape
-    rng = cache.generator(entropy(seed))
+    rng = np.random.default_rng(entropy(seed))
     rounded = rounds_level(noise)
     light = staged(effects, Stage.LIGHT)
     if light:
@@ -190,25 +189,16 @@ def levels(level: Array, rounded: bool = True) -> Array:
 
 
 class SimCache:
-    """What stationary simulations of one protocol share, remembered by whoever repeats
-    them (a diagnosis holds one): the model's noise draws per seed and shape (they do not
-    depend on the effects), the effects' draws per seed and sequence of calls (a fit asks
-    for the same arrays with other parameters: drawing a normal costs ten times copying
-    it), and the light levels of a read-only base.  Arrays handed out are read-only or
-    copies; at most ``max_bytes`` of effect draws are kept, the oldest going first."""
+    """What stationary simulations of one protocol share, held by whoever repeats them (a
+    diagnosis holds one): the model's noise draws per seed and shape (they do not depend
+    on the effects) and the light levels of a read-only base, both read-only."""
 
-    def __init__(self, max_bytes: int = 96 << 20):
-        self.max_bytes = max_bytes
-        self.kept: OrderedDict[tuple[Any, ...], tuple[Array, dict[str, Any]]] = OrderedDict()
-        self.size = 0
+    def __init__(self) -> None:
         self._model: dict[tuple[int, ...], Array] = {}
         self._levels: list[tuple[Array, bool, Array]] = []
 
-    def generator(self, seed_material: list[int]) -> Remembered:
-        return Remembered(seed_material, self)
-
     def model_draws(self, seed: int, samples: int, rows: int, robots: int) -> Array:
-        """The model's noise draws, (rows, samples x robots) read-only."""
+        """The model's noise draws, (rows, samples x robots)."""
         key = (seed, samples, rows, robots)
         if key not in self._model:
             draws = np.random.default_rng([seed, 0x5A7]).integers(
@@ -231,72 +221,3 @@ class SimCache:
         flat.flags.writeable = False
         self._levels = self._levels[-7:] + [(base, rounded, flat)]
         return flat
-
-    def keep(self, key: tuple[Any, ...], value: Array, state: dict[str, Any]) -> None:
-        kept = np.array(value)
-        kept.flags.writeable = False
-        if kept.nbytes > self.max_bytes:
-            return
-        old = self.kept.pop(key, None)
-        if old is not None:
-            self.size -= old[0].nbytes
-        self.kept[key] = (kept, state)
-        self.size += kept.nbytes
-        while self.size > self.max_bytes:
-            _, (dropped, _) = self.kept.popitem(last=False)
-            self.size -= dropped.nbytes
-
-
-class Remembered:
-    """``np.random.default_rng(seed_material)`` whose ``standard_normal(size)`` and
-    ``random(size)`` draws are remembered in a ``SimCache``: the n-th draw after the same
-    n - 1 calls is the same array.  Any other use gets the generator itself, at the same
-    point of its stream."""
-
-    def __init__(self, seed_material: list[int], cache: SimCache):
-        self._seed = tuple(int(e) for e in seed_material)
-        self._cache = cache
-        self._calls: tuple[Any, ...] | None = ()
-        self._state: dict[str, Any] | None = None   # the bit generator's state after them
-        self._rng: np.random.Generator | None = None
-
-    def standard_normal(self, size: Any = None, **kwargs: Any) -> Any:
-        return self._draw('standard_normal', size, kwargs)
-
-    def random(self, size: Any = None, **kwargs: Any) -> Any:
-        return self._draw('random', size, kwargs)
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith('_'):
-            raise AttributeError(name)
-        rng = self._generator()
-        self._calls = None              # the stream is no longer known by its calls
-        return getattr(rng, name)
-
-    def _generator(self) -> np.random.Generator:
-        if self._rng is None:
-            if self._state is None:
-                self._rng = np.random.default_rng(list(self._seed))
-            else:
-                bits = np.random.PCG64()
-                bits.state = self._state
-                self._rng = np.random.Generator(bits)
-        return self._rng
-
-    def _draw(self, method: str, size: Any, kwargs: dict[str, Any]) -> Any:
-        if kwargs or size is None or self._calls is None:
-            self._calls = None
-            return getattr(self._generator(), method)(size, **kwargs)
-        shape = tuple(int(s) for s in np.atleast_1d(size))
-        calls = self._calls + ((method, shape),)
-        key = (self._seed, calls)
-        if self._rng is None:
-            hit = self._cache.kept.get(key)
-            if hit is not None:
-                self._cache.kept.move_to_end(key)
-                self._calls, self._state = calls, hit[1]
-                return hit[0].copy()
-        value = getattr(self._generator(), method)(size)
-        self._calls = calls
-        self._cache.keep(key, value, self._generator().bit_generator.state)
-        return value

@@ -1,20 +1,7 @@
-"""The sensor's converter seen in each sensor's value distribution: dropouts, piles at a
-limit, the value lattice; their statistics and the evidence ``saturation_quantization``
-is fitted to.
-
-*Dropouts* are isolated readings at a sensor's lowest or highest value lying far from
-their local level (the median of the two readings before and after in the episode): by
-``AWAY`` readings, ``STEADY`` times the neighbours' range and ``SPREADS`` robust sds of
-the episode's deviations.  A value holding readings for stretches in a moving light is a
-limit, not a dropout value; a value standing apart from every other reading
-(``_detached``) is beyond the noise however wide it is.  They are repaired (read as a
-neighbour's level) before any other statistic, and compared as shares (``dropout``,
-``closed_loop_dropout``) by an exact count test (``recount``).  A *pile* is the share
-of readings within ``WIDTH`` of the most common value among the outermost ``TAIL`` of a
-sensor's readings (``pileup``); a *limit* is a value the real readings pile up at where
-the simulator puts readings beyond it (``limits``).  The *lattice*: the share of
-readings at each cell's most common value (``mode_share``) and on each sensor's most
-common residue modulo small steps (``granularity``, ``loop_granularity`` in closed loop).
+"""The sensor's converter in each sensor's value distribution: dropouts (isolated readings
+at a sensor's extreme, far from their neighbours; repaired before any other statistic,
+compared by a count test), piles at a limit, and the value lattice; their statistics and
+the evidence ``saturation_quantization`` is fitted to.  docs/diagnosis.md gives the rules.
 """
 from __future__ import annotations
 
@@ -25,8 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..effects.base import Array
-from ..effects.base import Key
+from ..effects.base import Array, Key
 from . import bootstrap
 
 ENDS = ('to the lowest reading', 'to the highest reading')
@@ -52,9 +38,7 @@ COUNT_SAMPLES, MAX_COPIES, KNOWN, EVENTS = 48_000, 20, 20, 2
 # -- dropouts ------------------------------------------------------------------------------
 
 class Runs:
-    """The runs a dropout is judged in (those of 3 samples or more): the samples run by
-    run (``order``), each position's run, each run's first position and size, and each
-    sample's position (-1: in no such run).  The same for every replay of a protocol."""
+    """The runs (of 3 samples or more) a dropout is judged in, as positions run by run."""
 
     def __init__(self, runs: list[np.ndarray], samples: int):
         kept = [r for r in runs if r.size >= 3]
@@ -68,8 +52,7 @@ class Runs:
 
 def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, Array, Array]:
     """(``x`` with each dropout read as a neighbour's level, (N, C, 2) marks at the lowest
-    and highest value, (C, 2) each channel's extremes); ``moving``: the light moves within
-    a run (closed loop)."""
+    and highest value, (C, 2) extremes); ``moving``: the light moves within a run."""
     marks = np.zeros(x.shape + (2,), np.float32)
     xt = np.ascontiguousarray(x.T)        # channel by channel: far faster than by column
     ends = _extremes(xt)
@@ -116,7 +99,7 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, Array, Ar
 
 
 def _extremes(xt: Array) -> Array:
-    """(C, 2) each channel's (row's) least and greatest finite value (NaN where none)."""
+    """(C, 2) each row's least and greatest finite value."""
     if not np.isnan(xt).any():
         return np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1)
     with np.errstate(invalid='ignore'), warnings.catch_warnings():
@@ -126,9 +109,7 @@ def _extremes(xt: Array) -> Array:
 
 def _local(xo: Array, i: np.ndarray, k: np.ndarray, runs: Runs) -> tuple[Array, ...]:
     """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
-    readings at positions ``i`` of channels ``k`` (``xo``: channel by channel, run by run):
-    far from the median of their neighbours (those at the same value left out), then from
-    a quick robust sd of the ``WINDOW``."""
+    readings at positions ``i`` of channels ``k`` (rows of ``xo``)."""
     value = xo[k, i]
     around = xo[k, _neighbours(runs, NEAR, i)]
     around = np.where(around == value[None, :], np.nan, around)
@@ -152,7 +133,7 @@ def _local(xo: Array, i: np.ndarray, k: np.ndarray, runs: Runs) -> tuple[Array, 
 
 def _neighbours(runs: Runs, offsets: tuple[int, ...],
                 at: np.ndarray | None = None) -> np.ndarray:
-    """(len(offsets), N) positions of each position's neighbours in its run (reflected)."""
+    """(offsets, N) each position's neighbours in its run (reflected at its ends)."""
     at = np.arange(runs.run_of.size) if at is None else at
     start, n = runs.first[runs.run_of[at]], runs.sizes[runs.run_of[at]]
     j = (at - start)[None, :] + np.array(offsets)[:, None]
@@ -170,8 +151,7 @@ def _median4(col: Array, neighbours: np.ndarray) -> Array:
 
 
 def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
-    """Per run (the ``wanted`` ones; others inf): 1.4826 x the median deviation of its
-    readings from their local levels."""
+    """Per ``wanted`` run (others inf): the robust sd of its deviations."""
     out = np.full(runs.sizes.size, np.inf)
     for r in wanted:
         out[r] = 1.4826 * np.median(deviations[runs.first[r]:runs.first[r] + runs.sizes[r]])
@@ -185,8 +165,7 @@ def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None
 
 
 def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
-    """More than ``STRETCHED`` of the readings at a value lie next to another one: the
-    light holds the sensor there (a limit); dropouts at rate p do so about 2p of the time."""
+    """Do the readings at a value come in stretches (a limit the light holds)?"""
     pair = _adjacent(i, run_of)
     beside = np.zeros(i.size, bool)
     beside[1:] |= pair
@@ -203,10 +182,7 @@ def _flanked(i: np.ndarray, run_of: np.ndarray, group: np.ndarray) -> np.ndarray
 
 
 def _detached(col: Array, end: int) -> bool:
-    """Does the extreme value stand apart: ``DETACHED_HITS`` readings at it, and a gap to
-    the next value inward of ``AWAY`` readings and ``DETACHED`` times the widest gap
-    between the next ``SPACINGS`` distinct values (a noise tail thins out value by value,
-    a lattice's gaps are alike)?"""
+    """Does the extreme value stand apart from the next values inward, beyond the noise?"""
     x = col[np.isfinite(col)]
     x = x if end == 0 else -x
     low = x.min()
@@ -225,8 +201,7 @@ def _detached(col: Array, end: int) -> bool:
 # -- piles and the lattice -------------------------------------------------------------
 
 def piles(x: Array) -> tuple[float | None, float | None]:
-    """(low, high): the most common value among the outermost ``TAIL`` of finite ``x`` at
-    each end (the outermost of equals)."""
+    """(low, high): the most common value among the outermost ``TAIL`` of ``x``."""
     x = x[np.isfinite(x)]
     if x.size == 0:
         return None, None
@@ -254,8 +229,7 @@ def edge_hits(x: Array) -> Array:
 
 def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
                     total: Any) -> dict[str, Array]:
-    """Sums by ``total``'s groups (``stationary.Grouping`` of the samples ``order`` keeps)
-    of the converter's stationary statistics."""
+    """Sums by ``total``'s groups (of the samples ``order`` keeps) of the statistics."""
     o, c = order, x.shape[1]
     low = np.nanmin(x) if np.isfinite(x).any() else 0.0
     if not (np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5):
@@ -329,8 +303,7 @@ def _stationary_keys(ch: tuple[int, ...], conditions: tuple[str, ...],
 
 
 def _shares(channels: Sequence[int], share: Array) -> list[Array]:
-    """Dropout shares (R, C, 2) per sensor and end, and pooled over the sensors (a small
-    rate shared by many sensors shows there); keys ``_share_keys``."""
+    """Dropout shares (R, C, 2) per sensor and end, and pooled over the sensors."""
     cols = []
     for j in range(len(ENDS)):
         cols.append(share[:, :, j])
@@ -350,8 +323,7 @@ def _share_keys(family: str, channels: tuple[int, ...], condition: str | None) -
 
 def loop_sums(x: Array, marks: Array, ep: np.ndarray, episodes: int,
               values: bool) -> dict[str, Array]:
-    """Per-episode sums of the closed-loop converter statistics; ``values``: the lattice
-    too (a diagnosis with no stationary recording)."""
+    """Per-episode sums; ``values``: the lattice too (no stationary recording beside)."""
     def by(v: Array) -> Array:
         out = np.zeros((episodes,) + v.shape[1:])
         np.add.at(out, ep, v)
@@ -365,9 +337,8 @@ def loop_sums(x: Array, marks: Array, ep: np.ndarray, episodes: int,
 
 
 def _on_lattice(r: Array) -> tuple[Array, Array]:
-    """((N, C) each reading's weight: 1 over the readings at its value, 0 at the sensor's
-    least and greatest; (N, C, Q) on the sensor's most common residue): each value seen
-    counts once, however often (a reading held at one value makes no lattice)."""
+    """((N, C) weights that count each value seen once, none at the extremes; (N, C, Q) on
+    the sensor's most common residue)."""
     weight, on = np.zeros(r.shape), np.zeros(r.shape + (len(MODULI),))
     for k in range(r.shape[1]):
         values, index, counts = np.unique(r[:, k], return_inverse=True, return_counts=True)
@@ -399,8 +370,7 @@ def loop_stats(b: bootstrap.Blocks, s: Array, i: int,
 # -- rare counts -----------------------------------------------------------------------
 
 def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
-    """{Key: [count, readings]} of the dropout statistics of repaired recordings (each with
-    ``marks``, ``kind``, ``recording``), summed over recordings with equal keys."""
+    """{Key: [count, readings]} of the dropout statistics of repaired recordings."""
     out: dict[Key, list[float]] = {}
     for r in recordings:
         rec, marks = r.recording, r.marks
@@ -425,8 +395,7 @@ def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
 
 
 def count_copies(samples: int, copies: int) -> int:
-    """Copies simulated for the counts: the comparison's own when they hold half of
-    ``COUNT_SAMPLES`` readings, else ``COUNT_SAMPLES`` readings (at most ``MAX_COPIES``)."""
+    """Copies simulated for the counts: enough for ``COUNT_SAMPLES`` readings."""
     n = max(samples, 1)
     if n * copies >= COUNT_SAMPLES / 2:
         return copies
@@ -442,9 +411,8 @@ def undecided(real: dict[Key, list[float]], sim: dict[Key, list[float]]) -> bool
 
 def limits(real: Array, sim: Array, sensors: Sequence[int],
            reading_range: tuple[float, float]) -> list[dict[str, Any]]:
-    """The limits the real readings pile up at: {end, value, share, sensors}, pooled over
-    the sensors whose extreme sits at the same value (limits of the reading range itself
-    are modelled and do not count)."""
+    """The limits the real readings pile up at where the simulator passes them: {end,
+    value, share, sensors}, pooled over the sensors with that extreme."""
     out: list[dict[float, list[tuple[Any, ...]]]] = [{}, {}]
     for sensor in sensors:
         x, y = real[:, sensor], sim[:, sensor]
@@ -477,8 +445,7 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
 
 
 def grid(x: Array) -> tuple[int, int]:
-    """(step, origin): the coarsest lattice origin + k * step (2..32) on which nearly all
-    integer readings ``x`` lie, else (1, 0)."""
+    """(step, origin): the coarsest lattice (step 2..32) holding nearly all of ``x``."""
     if x.size < 20 or not np.all(x == np.round(x)):
         return 1, 0
     values, weight = np.unique(x, return_counts=True)
@@ -495,8 +462,8 @@ def on_grid(x: Array, step: int, origin: int) -> float:
 
 
 def dropouts(real: Sequence[Any], sim: Sequence[Any]) -> dict[int, tuple[float, float]]:
-    """{sensor: (value, rate)} of the sensors with more dropouts than the simulator's
-    replays (in order, any copies) give, alone or pooled with sensors at the same value."""
+    """{sensor: (value, rate)} with more dropouts than the replays ``sim`` (alone or pooled
+    with sensors dropping out to the same value)."""
     if not real:
         return {}
     sensors = list(real[0].recording.channels_used)
@@ -557,8 +524,7 @@ def _marked(r: Any, sensors: list[int]) -> tuple[Array, Array, list[tuple[float,
 
 
 def rescaled_rate(rate: float, real_share: float, sim_share: float) -> float:
-    """A dropout rate scaled by the real over the simulated share seen (a dropout near its
-    level is not seen, on either side alike)."""
+    """A dropout rate scaled by the real over the simulated share seen."""
     if sim_share <= 0:
         return rate
     return round(float(np.clip(rate * real_share / sim_share, rate, MAX_RATE)), 5)

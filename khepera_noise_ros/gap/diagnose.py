@@ -31,7 +31,7 @@ from .compare import ALPHA, Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
 from .select import MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
-from .simconfig import SimConfig
+from ..simconfig import SimConfig
 from .target import Target
 
 FORMAT = 'khepera-noise-diagnosis/1'

@@ -25,7 +25,7 @@ from ..effects.base import Array
 from ..effects.simulate import EffectEpisodes, SimCache, stationary
 from ..recording import Recording
 from .protocol import ProtocolError, base_mode, condition_world, genome_of, kind, runs
-from .simconfig import SimConfig
+from ..simconfig import SimConfig
 
 class Replayer:
     """Replays of one recording's protocol under one configuration.  What every replay

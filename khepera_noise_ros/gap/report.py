@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import atomic_write_text, write_json
-from . import simconfig
+from .. import simconfig
 from .diagnose import Diagnosis
 from .compare import MARGIN, Comparison
 

@@ -30,7 +30,7 @@ from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, flo
 from .families import FAMILIES, having, of_part
 from .protocol import episodes, kind, runs
 from .replay import Replayer
-from .simconfig import SimConfig
+from ..simconfig import SimConfig
 
 SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``

@@ -21,8 +21,8 @@ from scipy import stats as sps
 from ..core import evolution, network
 from ..core.khepera import World
 from ..core.task import step_fitness
-from .simconfig import SimConfig
 from ..effects.simulate import EffectEpisodes
+from ..simconfig import SimConfig
 
 Reality = Callable[[np.ndarray, np.ndarray], np.ndarray]
 

@@ -30,13 +30,13 @@ from ..core.noise import DISTRIBUTIONS, NoiseModel
 from ..effects import IntensityDependentNoise
 from ..effects.correlated_noise import cluster
 from ..recording import Recording
-from . import split
-from .evidence import correlation_evidence
-from .protocol import check, kind, runs
-from .replay import Replayer
-from .select import MIN_REDUCTION
-from .simconfig import SimConfig
-from .target import Target
+from ..gap import split
+from ..gap.evidence import correlation_evidence
+from ..gap.protocol import check, kind, runs
+from ..gap.replay import Replayer
+from ..gap.select import MIN_REDUCTION
+from ..gap.target import Target
+from ..simconfig import SimConfig
 
 CALIBRATION_ROUNDS = 3
 

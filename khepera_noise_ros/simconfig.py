@@ -18,11 +18,11 @@ from pathlib import Path
 
 import yaml
 
-from ..core.khepera import WORLD_KEYS, World
-from ..core.noise import NoiseModel, format_groups, parse_groups
-from ..core.task import Task
-from ..files import atomic_write_text
-from .. import effects as fx
+from .core.khepera import WORLD_KEYS, World
+from .core.noise import NoiseModel, format_groups, parse_groups
+from .core.task import Task
+from .files import atomic_write_text
+from . import effects as fx
 
 TASK_KEYS = ('steps', 'perturb_every', 'perturbation_deg')
 NOISE_KEYS = ('noise_model', 'dependent_level', 'independent_level', 'dependence_groups',
