@@ -195,33 +195,26 @@ class Candidate:
 
 class Evidence(Protocol):
     """What a fitter sees: real recordings against the simulator with the effects
-    ``given`` (``gap.target.TargetEvidence``); docs/diagnosis.md says how each is made."""
+    ``given`` (``gap.target.TargetEvidence``; docs/diagnosis.md says how each is made)."""
 
-    @property
-    def channels(self) -> list[int]: ...
-    @property
-    def kinds(self) -> frozenset[str]: ...        # 'stationary', 'closed_loop'
-    @property
-    def given(self) -> tuple[Effect, ...]: ...
-    @property
-    def observed_base(self) -> bool: ...          # no light model: levels not comparable
-    @property
-    def samples(self) -> int: ...
-    def rows(self, family: str) -> list[Row]: ...
-    def families(self, part: str | None = None) -> frozenset[str]: ...
-    def objective(self, effects: Sequence[Effect], kinds: tuple[str, ...] | None = None,
-                  families: frozenset[str] | None = None, limits: bool = False) -> float: ...
-    def group_evidence(self, part: str) -> Array: ...      # (C, C) z: 'fast'/'slow' shared
-    def group_null(self, part: str) -> Array: ...          # (draws, C, C) the same, no gap
-    def own_wander(self) -> dict[int, dict[str, Any]]: ...
-    def shared_change(self) -> dict[str, Any] | None: ...
-    def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]: ...
-    def spread_cells(self, sensors: Sequence[int],
-                     closed_loop: bool = False) -> list[tuple[float, float]]: ...
-    def converter(self) -> dict[str, Any]: ...
-    def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect: ...
-    def delayed_sensors(self) -> tuple[int, ...]: ...
-    def stationary_runs(self, simulated: bool) -> list[Array]: ...
+    channels: list[int]
+    kinds: frozenset[str]                                    # 'stationary', 'closed_loop'
+    given: tuple[Effect, ...]
+    observed_base: bool                                      # no light model: no levels
+    samples: int
+    rows: Callable[[str], list[Row]]                         # a family's statistics
+    families: Callable[..., frozenset[str]]                  # present (of one part)
+    objective: Callable[..., float]         # (effects, kinds, families, limits) -> discrepancy
+    group_evidence: Callable[[str], Array]  # (C, C) z: 'fast' or 'slow' noise shared
+    group_null: Callable[[str], Array]      # (draws, C, C) the same with no gap
+    own_wander: Callable[[], dict[int, dict[str, Any]]]
+    shared_change: Callable[[], dict[str, Any] | None]
+    steady_rows: Callable[[list[Row], dict[str, Any]], list[Row]]
+    spread_cells: Callable[..., list[tuple[float, float]]]  # (sensors, closed_loop)
+    converter: Callable[[], dict[str, Any]]
+    rescaled_dropout: Callable[[Effect, Sequence[int]], Effect]
+    delayed_sensors: Callable[[], tuple[int, ...]]
+    stationary_runs: Callable[[bool], list[Array]]
 
 
 def rows(sensors: tuple[int, ...], channels: int) -> list[int]:

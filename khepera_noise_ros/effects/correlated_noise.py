@@ -153,4 +153,3 @@ def _loop_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float |
             num += max(float(np.sum([e for _, e in cells])), 0.0)
             den += float(np.sum(level * level))
     return float(np.sqrt(num / den)) if num > 0 and den > 0 else None
-

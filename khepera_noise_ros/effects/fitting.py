@@ -1,22 +1,12 @@
-"""What an effect's fitter sees of the real recordings, and what fitters share.
-
-The diagnosis (``gap``) holds real recordings against the simulator; an effect's
-``fit`` reads that comparison through the ``Evidence`` protocol: the statistics of a
-family as rows (real, simulated, standard error, z), the discrepancy of the simulator
-with trial effects added (``objective``, a deterministic function of its arguments),
-and the few measurements that locate an effect (group evidence, own wanders, a shared
-change, the converter's value distribution, delayed sensors).  Nothing here knows how
-they are computed, so the effects stay below the diagnosis.
-"""
+"""What the effects' fitters share: thresholds, searches and small statistics."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
-from .base import Candidate, Effect, Evidence, Key, Row
+from .base import Effect, Evidence, Row
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
 ALPHA = 0.01            # family-wise level of the fitters' tests (Holm)

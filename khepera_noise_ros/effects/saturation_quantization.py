@@ -109,4 +109,3 @@ def _strongest(found: list[dict[str, Any]], end: int) -> dict[str, Any] | None:
     """The limit at ``end`` (0 floor, 1 ceiling) holding the most readings."""
     mine = [f for f in found if f['end'] == end]
     return max(mine, key=lambda f: f['share'] * len(f['sensors'])) if mine else None
-

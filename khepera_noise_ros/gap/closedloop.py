@@ -443,4 +443,3 @@ def _solve(a: Array, b: Array) -> Array:
     if ok.any():
         out[ok] = np.linalg.solve(a[ok], b[ok])
     return out
-

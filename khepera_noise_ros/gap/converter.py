@@ -12,7 +12,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..effects.base import Array, Key
+from ..core.khepera import DARK
+from ..effects.base import Array, Key, Row
+from ..effects.fitting import Z_DETECT
+from ..recording import reading_range
 from . import bootstrap
 
 ENDS = ('to the lowest reading', 'to the highest reading')
@@ -408,6 +411,41 @@ def undecided(real: dict[Key, list[float]], sim: dict[Key, list[float]]) -> bool
 
 
 # -- evidence for the converter's fit ------------------------------------------------------
+
+def evidence(real: Sequence[Any], sim: Sequence[Any], grains: list[Row]) -> dict[str, Any]:
+    """The value distributions of repaired recordings ``real`` against their replays
+    ``sim``: the limits, each sensor's lattice where the simulator's readings are off it
+    (``grains``: the granularity statistics, flagged beyond ``Z_DETECT``), dropouts."""
+    rec = real[0].recording
+    real_x = np.concatenate([r.recording.readings for r in real])
+    sim_x = np.concatenate([r.recording.readings for r in sim])
+    bounds = reading_range(rec.manifest, rec.channels)
+    timed = {r.key.sensors[0] for r in grains}
+    flagged = {r.key.sensors[0] for r in grains if r.z > Z_DETECT}
+    inner = {s: _inner(real_x[:, s]) for s in rec.channels_used}
+    pooled = grid(np.concatenate(list(inner.values())))
+    lattices = {}
+    for sensor in rec.channels_used:
+        x = real_x[:, sensor]
+        lattice = grid(inner[sensor])
+        if lattice[0] == 1 and inner[sensor].size < 20 and pooled[0] > 1 and \
+                on_grid(x[np.isfinite(x)], *pooled) >= 0.95:
+            lattice = pooled      # too few values of its own: the other sensors' lattice
+        # without granularity statistics: the simulator's readings off the real lattice
+        shown = sensor in flagged if sensor in timed else grid(_inner(sim_x[:, sensor])) != lattice
+        if lattice[0] > 1 and shown:
+            lattices[sensor] = lattice
+    lost = dropouts(real, sim)
+    top = max(DARK, *(v for v in bounds if np.isfinite(v)), *(v for v, _ in lost.values()))
+    return {'limits': limits(real_x, sim_x, rec.channels_used, bounds), 'lattices': lattices,
+            'dropouts': lost, 'top': top}
+
+
+def _inner(x: Array) -> Array:
+    """The finite readings strictly between their least and greatest."""
+    x = x[np.isfinite(x)]
+    return x[(x > x.min()) & (x < x.max())] if x.size else x
+
 
 def limits(real: Array, sim: Array, sensors: Sequence[int],
            reading_range: tuple[float, float]) -> list[dict[str, Any]]:

@@ -1,14 +1,10 @@
 """Real recordings held against the simulator, with or without added effects.
 
-A ``Target`` repairs the recordings' dropouts and computes their statistics once (with
-bootstrap replicates), and replays their protocols in the simulator on demand.
-``compare`` gives the full comparison (bootstrap variance on both sides); ``objective``
-is the cheap one a fit minimises: simulated estimates only, the simulated variance
-taken as the real one over the number of copies, and common random numbers (a fixed
-seed), so it is a deterministic function of the effects.  What repeated simulations
-share (replays, layouts, draws, objectives) lives in one ``Memory`` that the target and
-its ``with_given`` copies hold; nothing is remembered anywhere else.  ``evidence``
-gives an effect's fitter the target and a comparison through ``effects.Evidence``.
+A ``Target`` computes the real statistics once and replays the recordings' protocols on
+demand: ``compare`` (bootstrap variance on both sides) and ``objective`` (what a fit
+minimises: simulated estimates only, common random numbers).  What repeated simulations
+share lives in one ``Memory`` held by the target and its copies, nothing anywhere else;
+``evidence`` is what an effect's fitter sees (``effects.base.Evidence``).
 """
 from __future__ import annotations
 
@@ -21,16 +17,15 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..effects import Effect
-from ..effects.base import Array
-from ..effects.base import Key, Row
+from ..effects.base import Array, Key, Row
 from ..effects.simulate import SimCache
-from ..recording import Recording, reading_range
+from ..recording import Recording
 from . import bootstrap, closedloop, converter, evidence, stationary
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
 from .families import FAMILIES, having, of_part
+from ..simconfig import SimConfig
 from .protocol import episodes, kind, runs
 from .replay import Replayer
-from ..simconfig import SimConfig
 
 SIM_COPIES = 3
 SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compare``
@@ -50,10 +45,9 @@ class Repaired:
 
     @staticmethod
     def of(rec: Recording, runs: converter.Runs | None = None) -> 'Repaired':
-        """``rec`` repaired (``runs``: its episodes' geometry, if known)."""
         k = kind(rec)
-        runs = runs if runs is not None else converter.Runs(episodes(rec), len(rec))
-        readings, marks, ends = converter.repair(rec.readings, runs, k == 'closed_loop')
+        readings, marks, ends = converter.repair(
+            rec.readings, runs or converter.Runs(episodes(rec), len(rec)), k == 'closed_loop')
         if readings is not rec.readings:
             rec = dataclasses.replace(rec, readings=readings)
         return Repaired(rec, marks, ends, k)
@@ -61,7 +55,7 @@ class Repaired:
 
 @dataclass
 class Memory:
-    """What the simulations of one target and its copies share (see the module)."""
+    """What the simulations of one target and its copies share."""
 
     cache: SimCache = field(default_factory=SimCache)
     replayers: dict[tuple[int, SimConfig], Replayer] = field(default_factory=dict)
@@ -98,26 +92,22 @@ class Target:
         self.real = Stats.join(self._real)
         self.channels = list(self.recordings[0].channels_used)
 
-    # -- copies ---------------------------------------------------------------------------
-
     def with_given(self, effects: Sequence[Effect]) -> 'Target':
-        """This target with ``effects`` always in the simulator (real statistics shared): a
-        candidate fitted against it is fitted jointly with them."""
-        out = copy.copy(self)
-        out.given = tuple(effects)
-        return out
+        """This target with ``effects`` always in the simulator: a candidate fitted against
+        it is fitted jointly with them."""
+        return self._copy(given=tuple(effects))
 
     def with_seed(self, seed: int) -> 'Target':
-        out = copy.copy(self)
-        out.seed = seed
-        return out
+        return self._copy(seed=seed)
 
     def with_config(self, config: SimConfig) -> 'Target':
-        out = copy.copy(self)
-        out.config = config
-        return out
+        return self._copy(config=config)
 
-    # -- simulation -----------------------------------------------------------------------
+    def _copy(self, **changes: Any) -> 'Target':
+        out = copy.copy(self)           # the real statistics and the memory shared
+        for name, value in changes.items():
+            setattr(out, name, value)
+        return out
 
     def _chosen(self, kinds: Sequence[str] | None) -> list[int]:
         return [i for i, k in enumerate(self.kinds) if kinds is None or k in kinds]
@@ -127,9 +117,8 @@ class Target:
 
     def simulate(self, effects: Sequence[Effect] = (), copies: int | None = None,
                  kinds: Sequence[str] | None = None, remember: bool = True) -> list[Repaired]:
-        """Replays (dropouts repaired) of the recordings of ``kinds`` with ``effects`` and the
-        given ones; a replay is a deterministic function of its arguments, so the last
-        ``REPLAYS`` are remembered (unless ``remember`` is False)."""
+        """Replays (repaired) of the recordings of ``kinds`` with ``effects`` and the given
+        ones, the last ``REPLAYS`` remembered (unless ``remember`` is False)."""
         copies = self.copies if copies is None else copies
         effects = tuple(self.given) + tuple(effects)
         out = []
@@ -190,8 +179,7 @@ class Target:
     def _simulated(self, effects: Sequence[Effect], replicates: int,
                    kinds: Sequence[str] | None,
                    copies: int | None = None) -> tuple[Stats, Array]:
-        """Simulated statistics of all copies together, and per statistic the factor by which
-        the bootstrap understates the variance of cell levels (``_inflation``)."""
+        """Simulated statistics of all copies together, and each one's ``_inflation``."""
         copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
@@ -201,11 +189,9 @@ class Target:
         return Stats.join(stats), np.concatenate(factors)
 
     def _inflation(self, i: int, sim: Recording, pooled: Stats, copies: int) -> Array:
-        """Per statistic: 1, except the cell levels of stationary data.  A slow wander moves
-        whole runs, which blocks within a run cannot show; the copies are independent
-        replays, so the spread of a level between copies is its sampling variance under
-        the simulated model; its ratio to the real bootstrap variance, pooled over a
-        condition's levels, scales their variance on both sides (never below 1)."""
+        """Per statistic: 1, except a stationary cell level: the variance of the level between
+        copies over the real bootstrap variance, pooled per condition, at least 1 (a slow
+        wander moves whole runs, which blocks within a run cannot show)."""
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
@@ -227,9 +213,7 @@ class Target:
         return factor
 
     def _plan(self, i: int, sim: Recording, copies: int) -> tuple[Any, ...]:
-        """What ``_inflation`` needs of the protocol alone: sample codes of (cell, copy),
-        counts, and the (cell, channel) entries with a real level, their condition and
-        real variance."""
+        """What ``_inflation`` needs of the protocol alone, made once."""
         if (i, copies) not in self.memory.plans:
             span = int(self.recordings[i].episode.max()) + 1
             labels, cell = stationary.cells(sim)
@@ -254,8 +238,7 @@ class Target:
     # -- comparisons ----------------------------------------------------------------------
 
     def compare(self, effects: Sequence[Effect] = (), replicates: int | None = None) -> Comparison:
-        """Real against simulated-with-``effects``, bootstrap variance on both sides; the
-        rare counts (dropouts) judged by a count test against enough simulated copies."""
+        """Real against simulated with ``effects``; rare counts by the count test."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
         sim, factor = self._simulated(effects, replicates, None)
         c = compare(self.real, sim, factor)
@@ -271,9 +254,8 @@ class Target:
     def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
                   families: frozenset[str] | None = None, margin: float = MARGIN,
                   limits: bool = False) -> float:
-        """The discrepancy with ``effects`` added over the recordings of ``kinds`` and the
-        statistics of ``families`` (None: all but the limits-only ones unless ``limits``),
-        simulated estimates only; each value is computed once."""
+        """The discrepancy with ``effects`` added, over ``kinds`` and ``families`` (None: all
+        but the limits-only ones unless ``limits``); each value computed once."""
         key = (self.seed, self.config, tuple(self.given) + tuple(effects),
                None if kinds is None else tuple(kinds), families, margin, limits)
         memo = self.memory.objectives
@@ -303,8 +285,7 @@ class Target:
         return discrepancy(np.clip(d[ok] / se[ok], -Z_CAP, Z_CAP), margin)
 
     def replicate_discrepancies(self, c: Comparison) -> Array:
-        """The discrepancy of each bootstrap replicate of the real data against the
-        simulated side of ``c`` (a comparison of this target)."""
+        """Each real bootstrap replicate's discrepancy against the simulated side of ``c``."""
         rows = [self.real.index[k] for k in c.keys]
         with np.errstate(divide='ignore', invalid='ignore'):
             z = (self.real.values[1:, rows] - c.sim[None]) / c.se[None]
@@ -313,37 +294,19 @@ class Target:
         return out
 
     def evidence(self, c: Comparison | None) -> 'TargetEvidence':
-        """What a fitter sees (``c``: the comparison with the plain simulator, if any)."""
+        """What a fitter sees (``c``: the comparison with the simulator as given)."""
         return TargetEvidence(self, c)
 
 
 class TargetEvidence:
-    """``effects.Evidence`` of a target and its comparison with the plain simulator (the
-    given effects in it)."""
+    """``effects.base.Evidence`` of a target and its comparison with the simulator."""
 
     def __init__(self, target: Target, c: Comparison | None):
         self.target = target
         self.c = c if c is not None else Comparison([], *(np.zeros(0),) * 4)
-
-    @property
-    def channels(self) -> list[int]:
-        return list(self.target.channels)
-
-    @property
-    def kinds(self) -> frozenset[str]:
-        return frozenset(self.target.kinds)
-
-    @property
-    def given(self) -> tuple[Effect, ...]:
-        return self.target.given
-
-    @property
-    def observed_base(self) -> bool:
-        return self.target.base == 'observed'
-
-    @property
-    def samples(self) -> int:
-        return sum(len(r) for r in self.target.recordings)
+        self.channels, self.kinds = list(target.channels), frozenset(target.kinds)
+        self.given, self.observed_base = target.given, target.base == 'observed'
+        self.samples = sum(len(r) for r in target.recordings)
 
     def rows(self, family: str) -> list[Row]:
         if family not in FAMILIES:
@@ -415,32 +378,8 @@ class TargetEvidence:
 
     def converter(self) -> dict[str, Any]:
         t = self.target
-        rec = t.recordings[0]
-        sim = t.simulate()
-        real_x = np.concatenate([r.readings for r in t.recordings])
-        sim_x = np.concatenate([r.recording.readings for r in sim])
-        bounds = reading_range(rec.manifest, rec.channels)
         grains = self.rows('granularity') or self.rows('loop_granularity')
-        timed = {r.key.sensors[0] for r in grains}
-        flagged = {r.key.sensors[0] for r in grains if r.z > 4.0}
-        inner = {s: _inner(real_x[:, s]) for s in rec.channels_used}
-        pooled = converter.grid(np.concatenate(list(inner.values())))
-        lattices = {}
-        for sensor in rec.channels_used:
-            x, y = real_x[:, sensor], sim_x[:, sensor]
-            lattice = converter.grid(inner[sensor])
-            if lattice[0] == 1 and inner[sensor].size < 20 and pooled[0] > 1 and \
-                    converter.on_grid(x[np.isfinite(x)], *pooled) >= 0.95:
-                lattice = pooled      # too few values of its own: the other sensors' lattice
-            # without granularity statistics: the simulator's readings off the real lattice
-            shown = sensor in flagged if sensor in timed else \
-                converter.grid(_inner(y)) != lattice
-            if lattice[0] > 1 and shown:
-                lattices[sensor] = lattice
-        lost = converter.dropouts(t.real_data, sim)
-        top = max(525.0, *(v for v in bounds if np.isfinite(v)), *(v for v, _ in lost.values()))
-        return {'limits': converter.limits(real_x, sim_x, rec.channels_used, bounds),
-                'lattices': lattices, 'dropouts': lost, 'top': top}
+        return converter.evidence(t.real_data, t.simulate(), grains)
 
     def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect:
         t = self.target
@@ -458,9 +397,3 @@ class TargetEvidence:
             else t.of_kind('stationary')
         return [rec.readings[r][:, t.channels].astype(np.float64) for rec in recs
                 for r in runs(rec)]
-
-
-def _inner(x: Array) -> Array:
-    """The finite readings strictly between their least and greatest."""
-    x = x[np.isfinite(x)]
-    return x[(x > x.min()) & (x < x.max())] if x.size else x
