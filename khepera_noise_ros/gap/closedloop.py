@@ -173,8 +173,8 @@ def _change_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, ste
     and their products with every reading, fitted per condition."""
     u = np.nan_to_num(rec.direction[order], nan=0.0) * power
     t = np.arange(CHANGE_LAGS - 1, len(ep) - 1)
-    rows = t[(ep[t + 1] == ep[t - CHANGE_LAGS + 1]) & (steps[t + 1] - steps[t - CHANGE_LAGS + 1]
-                                                      == CHANGE_LAGS)
+    back = t - CHANGE_LAGS + 1
+    rows = t[(ep[t + 1] == ep[back]) & (steps[t + 1] - steps[back] == CHANGE_LAGS)
              & (steps[t + 1] % perturb_every != 0)]
     e, use = np.zeros_like(r), np.zeros(len(r), bool)
     condition = rec.condition[order]
@@ -198,8 +198,8 @@ def _change_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, ste
     onehot = _onehot(r, use)
     return {'chg_band_n': _by(ep, onehot * 1.0, m),
             'chg_band_s2': 0.5 * _by(ep, onehot * (e * e)[:, None, :], m),
-            'chg_q_n': _by(ep, both * 1.0, m), 'chg_q_xy': 0.5 * _by(ep, eq[:, :, None] *
-                                                                      eq[:, None, :], m),
+            'chg_q_n': _by(ep, both * 1.0, m),
+            'chg_q_xy': 0.5 * _by(ep, eq[:, :, None] * eq[:, None, :], m),
             'chg_q_xx': 0.5 * _by(ep, (eq * eq)[:, :, None] * both, m),
             'chg_lag_n': _by(ep, lagged * 1.0, m), 'chg_lag_s': 0.5 * _by(ep, lag * lagged, m)}
 

@@ -215,7 +215,8 @@ def recount(c: Comparison, real: dict[Key, list[float]],
     if not rows:
         return c
     out = copy.copy(c)
-    out.real, out.sim, out.se, out.z = (np.array(v, np.float64) for v in (c.real, c.sim, c.se, c.z))
+    out.real, out.sim, out.se, out.z = (np.array(v, np.float64)
+                                        for v in (c.real, c.sim, c.se, c.z))
     out._families = None
     for i in rows:
         (r, n_r), (s, n_s) = real[c.keys[i]], sim[c.keys[i]]

@@ -401,4 +401,3 @@ def _describe(rec: Recording) -> dict[str, Any]:
             'episodes': int(np.unique(rec.episode).size), 'conditions': rec.conditions(),
             'channels': rec.channels, 'channels_used': rec.channels_used,
             'source': rec.manifest.get('source')}
-

@@ -117,5 +117,3 @@ def check(recordings: Sequence[Recording]) -> None:
 
 def name(rec: Recording, i: int) -> str:
     return str(rec.manifest.get('name', f'#{i + 1}'))
-
-

@@ -27,6 +27,7 @@ from ..recording import Recording
 from .protocol import ProtocolError, base_mode, condition_world, genome_of, kind, runs
 from ..simconfig import SimConfig
 
+
 class Replayer:
     """Replays of one recording's protocol under one configuration.  What every replay
     shares (the light of each step, the index columns of each number of copies) is made

@@ -158,8 +158,8 @@ def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
         change = run_mean[old] - run_mean[new]
         np.add.at(dd, total.of_block[at], (x[samples] - run_mean[new][:, None, :])
                   * change[:, None, :])
-        np.add.at(d2, total.of_block[at], np.broadcast_to((change ** 2)[:, None, :],
-                                                           (at.size, STEP_LAGS, c)))
+        np.add.at(d2, total.of_block[at],
+                  np.broadcast_to((change ** 2)[:, None, :], (at.size, STEP_LAGS, c)))
     out['step_dd'], out['step_d2'] = dd, d2
     return {k: v.astype(np.float64) for k, v in out.items()}
 
