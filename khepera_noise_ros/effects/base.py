@@ -34,11 +34,11 @@ class Stage(enum.Enum):
 
 def _number(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) \
-        and math.isfinite(v)
+        and bool(math.isfinite(v))
 
 
 def _index(v: Any) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and bool(v >= 0)
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def param(default: T, doc: str, kind: str | None = None, **allowed: Any) -> T:
     spec = Param(doc, kind, **allowed)
     if not spec.allows(default):
         raise TypeError(f'default {default!r} of {doc!r} is not {spec.allowed()}')
-    return cast(T, dataclasses.field(default=default, metadata={'param': spec}))
+    return dataclasses.field(default=default, metadata={'param': spec})
 
 
 @dataclass(frozen=True)
@@ -202,19 +202,26 @@ class Evidence(Protocol):
     given: tuple[Effect, ...]
     observed_base: bool                                      # no light model: no levels
     samples: int
-    rows: Callable[[str], list[Row]]                         # a family's statistics
-    families: Callable[..., frozenset[str]]                  # present (of one part)
-    objective: Callable[..., float]         # (effects, kinds, families, limits) -> discrepancy
-    group_evidence: Callable[[str], Array]  # (C, C) z: 'fast' or 'slow' noise shared
-    group_null: Callable[[str], Array]      # (draws, C, C) the same with no gap
-    own_wander: Callable[[], dict[int, dict[str, Any]]]
-    shared_change: Callable[[], dict[str, Any] | None]
-    steady_rows: Callable[[list[Row], dict[str, Any]], list[Row]]
-    spread_cells: Callable[..., list[tuple[float, float]]]  # (sensors, closed_loop)
-    converter: Callable[[], dict[str, Any]]
-    rescaled_dropout: Callable[[Effect, Sequence[int]], Effect]
-    delayed_sensors: Callable[[], tuple[int, ...]]
-    stationary_runs: Callable[[bool], list[Array]]
+
+    def rows(self, family: str) -> list[Row]: ...            # a family's statistics
+    def families(self, part: str | None = None) -> frozenset[str]: ...      # present ones
+
+    def objective(self, effects: Sequence[Effect], kinds: tuple[str, ...] | None = None,
+                  families: frozenset[str] | None = None, limits: bool = False) -> float: ...
+
+    def group_evidence(self, part: str) -> Array: ...  # (C, C) z: 'fast'/'slow' noise shared
+    def group_null(self, part: str) -> Array: ...      # (draws, C, C) the same with no gap
+    def own_wander(self) -> dict[int, dict[str, Any]]: ...
+    def shared_change(self) -> dict[str, Any] | None: ...
+    def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]: ...
+
+    def spread_cells(self, sensors: Sequence[int],
+                     closed_loop: bool = False) -> list[tuple[float, float]]: ...
+
+    def converter(self) -> dict[str, Any]: ...
+    def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect: ...
+    def delayed_sensors(self) -> tuple[int, ...]: ...
+    def stationary_runs(self, simulated: bool) -> list[Array]: ...
 
 
 def rows(sensors: tuple[int, ...], channels: int) -> list[int]:

@@ -85,7 +85,7 @@ class CorrelatedNoise(Effect):
         groups = tuple(found)
         effect = refine(evidence, lambda s: cls(groups, s), first)
         # shared noise of a fixed size in readings, one more form of the same effect
-        level = np.mean([r.real for r in evidence.rows('level')] or [DARK / 2])
+        level = float(np.mean([r.real for r in evidence.rows('level')] or [DARK / 2]))
         fixed = refine(evidence, lambda s: cls(groups, 0.0, s), start * level, evaluations=5)
         if evidence.objective([fixed]) < evidence.objective([effect]):
             effect = fixed
@@ -139,7 +139,7 @@ def _shared_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float
                 sr = [spread[r.key.condition][x][0] for x in (a, b)]
                 ss = [spread[r.key.condition][x][1] for x in (a, b)]
                 num += r.real * sr[0] * sr[1] - r.sim * ss[0] * ss[1]
-                den += np.mean([level[r.key.condition][x][1] for x in g]) ** 2
+                den += float(np.mean([level[r.key.condition][x][1] for x in g])) ** 2
     return float(np.sqrt(max(num, 0.0) / den)) if den > 0 and num > 0 else 0.01
 
 

@@ -101,16 +101,16 @@ def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
     idx = [chans.index(s) for s in sensors]
     shared = moved or len(idx) > 1 and \
         slow[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
-    rho = {lag: np.mean([r.real - r.sim for r in acf
-                         if r.key.sensors[0] in sensors and r.key.part == f'lag {lag}']
-                        or [np.nan]) for lag in (1, 3)}
+    rho = {lag: float(np.mean([r.real - r.sim for r in acf
+                               if r.key.sensors[0] in sensors and r.key.part == f'lag {lag}']
+                              or [np.nan])) for lag in (1, 3)}
     if not np.isfinite(rho[1]):
         rho[1] = 0.0
     if not np.isfinite(rho[3]):          # closed loop: lag 1 only; as an AR(1) would
         rho[3] = max(rho[1], 0.0) ** 3
     a = float(np.clip((max(rho[3], 1e-3) / max(rho[1], 1e-3)) ** 0.5, 0.3, 0.995))
     if own:                              # the own parts' excess, lag 10 against lag 1
-        r1, r10 = (np.median([v['acf'][lag] for v in own.values()]) for lag in (1, 10))
+        r1, r10 = (float(np.median([v['acf'][lag] for v in own.values()])) for lag in (1, 10))
         a = float(np.clip((max(r10, 1e-3) / max(r1, 1e-3)) ** (1 / 9), 0.3, 0.995))
     tau0 = -1.0 / math.log(a)
     spread, level = by_condition(evidence.rows('spread')), by_condition(evidence.rows('level'))
