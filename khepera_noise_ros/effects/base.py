@@ -12,13 +12,14 @@ import dataclasses
 import enum
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, NamedTuple, Protocol, Sequence, TypeVar, cast
+from typing import Any, Callable, ClassVar, NamedTuple, Protocol, Sequence, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
 Array = NDArray[np.float64]
+AnyArray = NDArray[Any]       # draws (uint16), float32 levels
 Step = Callable[[Array], Array]      # one sample: (channels, robots) levels, or (robots,) turns
 T = TypeVar('T')
 E = TypeVar('E', bound='Effect')
@@ -251,7 +252,7 @@ def held(f: Callable[[Array], Array], x: Array) -> Array:
 
 def ar1(z: Array, a: float) -> Array:
     """The AR(1) s[t] = a s[t-1] + z[t] along the first axis, s[-1] = 0."""
-    return cast(Array, lfilter([1.0], [1.0, -a], z, axis=0))
+    return lfilter([1.0], [1.0, -a], z, axis=0)
 
 
 def _plain(value: Any) -> Any:

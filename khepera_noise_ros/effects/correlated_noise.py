@@ -53,7 +53,7 @@ class CorrelatedNoise(Effect):
         located = [rows(g, channels) for g in self.groups]
 
         def step(level: Array) -> Array:
-            out = level.copy()
+            out: Array = level.copy()
             z = rng.standard_normal((len(located), robots))
             for g, members in enumerate(located):
                 out[members] += (self.strength * level[members].mean(axis=0)
@@ -63,7 +63,7 @@ class CorrelatedNoise(Effect):
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         located = [rows(g, level.shape[1]) for g in self.groups]
-        out = level.copy()
+        out: Array = level.copy()
         z = rng.standard_normal((level.shape[0], len(located), level.shape[2]))
         for g, members in enumerate(located):
             sd = self.strength * level[:, members].mean(axis=1) + self.constant

@@ -76,7 +76,7 @@ class EmpiricalNoise(Effect):
 
         def step(level: Array) -> Array:
             nonlocal state
-            out = level.copy()
+            out: Array = level.copy()
             fast = self._fast(level[located], rng.standard_normal((len(located), robots)),
                               spread, mix)
             out[located] = level[located] * (1.0 + slow[:, None] * state) + fast
@@ -94,7 +94,7 @@ class EmpiricalNoise(Effect):
         z[1:] *= math.sqrt(1 - a * a)
         fast = self._fast(level[:, located].transpose(1, 0, 2), d[1::2].transpose(1, 0, 2),
                           spread, mix).transpose(1, 0, 2)
-        out = level.copy()
+        out: Array = level.copy()
         out[:, located] = level[:, located] * (1.0 + slow[None, :, None] * ar1(z, a)) + fast
         return out
 

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from typing import Callable, Sequence, TypeVar
 
 import numpy as np
 
 from .base import Effect, Evidence, Row
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
+E = TypeVar('E', bound=Effect)
 ALPHA = 0.01            # family-wise level of the fitters' tests (Holm)
 STATIONARY, CLOSED_LOOP = 'stationary', 'closed_loop'
 
@@ -36,8 +37,8 @@ def golden(f: Callable[[float], float], lo: float, hi: float, evaluations: int) 
     return c if fc <= fd else d
 
 
-def refine(evidence: Evidence, make: Callable[[float], Effect], start: float,
-           kinds: tuple[str, ...] | None = (STATIONARY,), evaluations: int = 7) -> Effect:
+def refine(evidence: Evidence, make: Callable[[float], E], start: float,
+           kinds: tuple[str, ...] | None = (STATIONARY,), evaluations: int = 7) -> E:
     """``make(x)`` with x refined on a log scale within a factor 3 of ``start``."""
     start = float(np.clip(start, 1e-5, 1e3)) if np.isfinite(start) else 0.01
     kinds = present(evidence, kinds)

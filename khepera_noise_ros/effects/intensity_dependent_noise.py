@@ -52,7 +52,7 @@ class IntensityDependentNoise(Effect):
         located = rows(self.sensors, channels)
 
         def step(level: Array) -> Array:
-            out = level.copy()
+            out: Array = level.copy()
             z = rng.standard_normal(robots if self.shared else (len(located), robots))
             out[located] += z * self.amplitude(level[located])
             return out
@@ -62,7 +62,7 @@ class IntensityDependentNoise(Effect):
         cols = columns(self.sensors, level.shape[1])
         width = 1 if self.shared else len(rows(self.sensors, level.shape[1]))
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))
-        out = level.copy()
+        out: Array = level.copy()
         out[:, cols] += z * held(self.amplitude, level[:, cols])
         return out
 

@@ -50,14 +50,14 @@ class SaturationQuantization(Effect):
         located = rows(self.sensors, channels)
 
         def step(level: Array) -> Array:
-            out = level.copy()
+            out: Array = level.copy()
             out[located] = self.convert(level[located], rng)
             return out
         return step
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         located = rows(self.sensors, level.shape[1])
-        out = level.copy()
+        out: Array = level.copy()
         out[:, located] = self.convert(level[:, located], rng)
         return out
 

@@ -32,7 +32,7 @@ class SensorLatency(Effect):
 
         def step(level: Array) -> Array:
             past.append(level[located].copy())
-            out = level.copy()
+            out: Array = level.copy()
             out[located] = past[max(0, len(past) - 1 - self.steps)]
             del past[:-self.steps - 1]
             return out
@@ -40,7 +40,7 @@ class SensorLatency(Effect):
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
-        out = level.copy()
+        out: Array = level.copy()
         if self.steps <= 0:
             return out
         # sample t reads sample max(t - steps, 0): slices, not a gather of every sample

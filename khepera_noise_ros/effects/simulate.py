@@ -20,7 +20,7 @@ from ..core.khepera import DARK, SENSORS, TENTHS, World, to_tenths
 from ..core.noise import NoiseModel
 from ..core.streams import UNIT
 from ..core.task import Episodes, Task
-from .base import Array, Effect, Stage, Step
+from .base import AnyArray, Array, Effect, Stage, Step
 
 
 def staged(effects: Sequence[Effect], stage: Stage) -> list[Effect]:
@@ -107,10 +107,10 @@ class EffectNoise:
     def __getattr__(self, name: str) -> Any:
         return getattr(self.model_noise, name)
 
-    def apply(self, base: Array, sensor_draws: Array, group_draws: Array,
-              out: Array | None = None) -> Array:
+    def apply(self, base: AnyArray, sensor_draws: AnyArray, group_draws: AnyArray,
+              out: AnyArray | None = None) -> AnyArray:
         if not (self.light or self.reading):
-            result: Array = self.model_noise.apply(base, sensor_draws, group_draws, out=out)
+            result: AnyArray = self.model_noise.apply(base, sensor_draws, group_draws, out=out)
             return result
         readings = sense(np.asarray(base, np.float64), self.model_noise, sensor_draws,
                          group_draws, self.light, self.reading).astype(np.float32)
@@ -120,7 +120,7 @@ class EffectNoise:
         return out
 
 
-def sense(base: Array, noise: NoiseModel, sensor_draws: Array, group_draws: Array,
+def sense(base: Array, noise: NoiseModel, sensor_draws: AnyArray, group_draws: AnyArray,
           light: list[Step], reading: list[Step]) -> Array:
     """Light-stage effects, the model's noise on the light level (integer unless the
     reading is rounded at the end), then the reading stage."""
@@ -177,14 +177,14 @@ def rounds_level(noise: Any) -> bool:
     return getattr(noise, 'rounding', 'level') == 'level'
 
 
-def levels(level: Array, rounded: bool = True) -> Array:
+def levels(level: Array, rounded: bool = True) -> AnyArray:
     """(channels, samples x units) float32 light levels the model's noise acts on: rounded
     unless the reading is rounded at the end, never clipped (a light-stage effect can
     take the light beyond what the converter reads; the converter saturates once)."""
     if rounded:
         level = np.rint(level)
     flat = level.astype(np.float32)
-    out: Array = np.ascontiguousarray(flat.transpose(1, 0, 2)).reshape(flat.shape[1], -1)
+    out: AnyArray = np.ascontiguousarray(flat.transpose(1, 0, 2)).reshape(flat.shape[1], -1)
     return out
 
 
@@ -194,10 +194,10 @@ class SimCache:
     on the effects) and the light levels of a read-only base, both read-only."""
 
     def __init__(self) -> None:
-        self._model: dict[tuple[int, ...], Array] = {}
-        self._levels: list[tuple[Array, bool, Array]] = []
+        self._model: dict[tuple[int, ...], AnyArray] = {}
+        self._levels: list[tuple[Array, bool, AnyArray]] = []
 
-    def model_draws(self, seed: int, samples: int, rows: int, robots: int) -> Array:
+    def model_draws(self, seed: int, samples: int, rows: int, robots: int) -> AnyArray:
         """The model's noise draws, (rows, samples x robots)."""
         key = (seed, samples, rows, robots)
         if key not in self._model:
@@ -210,7 +210,7 @@ class SimCache:
             self._model[key] = out
         return self._model[key]
 
-    def levels(self, base: Array, rounded: bool) -> Array:
+    def levels(self, base: Array, rounded: bool) -> AnyArray:
         """``levels`` of ``base``, made once where ``base`` is read-only (a replay's light)."""
         if base.flags.writeable:
             return levels(np.asarray(base, np.float64), rounded)

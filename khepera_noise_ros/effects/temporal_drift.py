@@ -49,7 +49,7 @@ class TemporalDrift(Effect):
 
         def step(level: Array) -> Array:
             nonlocal state
-            out = level.copy()
+            out: Array = level.copy()
             out[located] *= 1.0 + state
             state = a * state + math.sqrt(1 - a * a) * self.sd * rng.standard_normal(state.shape)
             return out
@@ -62,7 +62,7 @@ class TemporalDrift(Effect):
                                  level.shape[2]))
         z[0] *= self.sd
         z[1:] *= math.sqrt(1 - a * a) * self.sd
-        out = level.copy()
+        out: Array = level.copy()
         out[:, cols] *= 1.0 + ar1(z, a)
         return out
 
@@ -132,10 +132,10 @@ def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
         tau = float(np.clip(math.exp(np.clip(x[1], -3, 12)), *bounds[1]))
         return TemporalDrift(sensors, round(sd, 5), round(tau, 2), bool(shared))
     start = [math.log(sd0), math.log(tau0)]
+    simplex = [start, [math.log(sd0 * 1.6), start[1]], [start[0], math.log(tau0 * 2.0)]]
     result = minimize(lambda x: evidence.objective([make(x)]), start, method='Nelder-Mead',
                       options={'maxfev': EVALUATIONS[bool(own and not moved)],
-                               'initial_simplex': [start, [math.log(sd0 * 1.6), start[1]],
-                                                   [start[0], math.log(tau0 * 2.0)]]})
+                               'initial_simplex': simplex})  # type: ignore[call-overload]
     effect, best = make(result.x), float(result.fun)
     if len(sensors) > 1:                  # the evidence for sharing can be weak: try both
         other = make(result.x, not shared)

@@ -14,6 +14,8 @@ separate stretch, and the sums of squares are pooled over runs.
 """
 from __future__ import annotations
 
+from typing import Any, Sequence
+
 import numpy as np
 
 from ..recording import Recording
@@ -54,7 +56,7 @@ def taus(longest: int) -> list[int]:
     return out
 
 
-def profile(rec: Recording, factors=None) -> dict:
+def profile(rec: Recording, factors: Sequence[int] | None = None) -> dict[str, Any]:
     """{'taus': [...], 'sensors': {s: [adev per tau]}, 'shared': [adev per tau]} of the
     recording's run residuals, pooled over runs (stationary recordings only)."""
     used = list(rec.channels_used)
@@ -81,7 +83,7 @@ def profile(rec: Recording, factors=None) -> dict:
             'shared': adev[:, -1].tolist()}
 
 
-def slope(taus_: list, adev: list) -> float:
+def slope(taus_: Sequence[float], adev: Sequence[float]) -> float:
     """Log-log slope of the deviation over its last three averaging times."""
     t, a = np.log(np.asarray(taus_, float)), np.log(np.asarray(adev, float))
     ok = np.isfinite(a)
@@ -98,10 +100,10 @@ def term(value: float) -> str:
     return min(SLOPES, key=lambda k: abs(SLOPES[k] - value))
 
 
-def compare(real: dict, sim: dict) -> dict:
+def compare(real: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
     """Real against simulated profiles: per sensor and shared, the ratio of deviations at
     the shortest and longest averaging time and the long-tau slope's noise term."""
-    out = {'taus': real['taus'], 'real': real, 'simulated': sim, 'sensors': {}}
+    out: dict[str, Any] = {'taus': real['taus'], 'real': real, 'simulated': sim, 'sensors': {}}
     for key in list(real['sensors']) + ['shared']:
         r = real['shared'] if key == 'shared' else real['sensors'][key]
         s = sim['shared'] if key == 'shared' else sim['sensors'].get(key)

@@ -117,7 +117,8 @@ def autocovariance(x: Array, segments: list[slice], max_lag: int) -> Array:
         size = 1 << int(2 * len(seg) - 1).bit_length()
         f = np.fft.rfft(seg, size, axis=0)
         out[:lags] += np.fft.irfft(f.real ** 2 + f.imag ** 2, size, axis=0)[:lags]
-    return out / total
+    out /= total
+    return out
 
 
 def politis_white(acov: Array, n: int) -> float:

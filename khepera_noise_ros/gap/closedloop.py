@@ -26,8 +26,7 @@ import numpy as np
 from scipy import sparse
 
 from ..core.task import fitness_factors
-from ..effects.base import Array
-from ..effects.base import Key
+from ..effects.base import AnyArray, Array, Key
 from ..recording import Recording
 from . import bootstrap
 
@@ -108,7 +107,7 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
                             {'perturb_every': perturb_every, 'heading': tracked})
 
 
-def _by(ep: np.ndarray, values: Array, episodes: int) -> Array:
+def _by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
     """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product)."""
     pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
                              shape=(episodes, ep.size))
@@ -327,8 +326,8 @@ def stats(b: bootstrap.Blocks, s: Array, more: Part) -> tuple[list[Key], list[Ar
             h = b.part(s, 'heading_band')[:, i].sum(axis=1)
             keys.append(Key('turn_size', (), c, 'deg per unit of command'))
             cols.append(h[:, 2] / h[:, 1])
-        for part in (_noise_stats, _scatter_stats, more):
-            k_, c_ = part(b, s, i, c)
+        for stat in (_noise_stats, _scatter_stats, more):
+            k_, c_ = stat(b, s, i, c)
             keys += k_
             cols += c_
     return keys, cols

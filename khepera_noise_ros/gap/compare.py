@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import stats as sps
 
-from ..effects.base import Array
-from ..effects.base import Key, Row
+from ..effects.base import Array, Key, Row
 from ..effects.fitting import ALPHA, holm
 from .families import FAMILIES, PARTS, having
 
@@ -42,7 +42,8 @@ class Stats:
 
     @property
     def estimate(self) -> Array:
-        return self.values[0]
+        out: Array = self.values[0]
+        return out
 
     @functools.cached_property
     def variance(self) -> Array:
@@ -61,7 +62,7 @@ class Stats:
     @staticmethod
     def join(parts: Sequence['Stats']) -> 'Stats':
         rows = min(p.values.shape[0] for p in parts)
-        return Stats([k for p in parts for k in p.keys],
+        return Stats(tuple(k for p in parts for k in p.keys),
                      np.concatenate([p.values[:rows] for p in parts], axis=1))
 
 
@@ -79,8 +80,8 @@ class Comparison:
         out: Array = holm(2.0 * sps.norm.sf(np.abs(self.z)))
         return out
 
-    def significant(self, alpha: float = ALPHA) -> Array:
-        out: Array = self.p_holm < alpha
+    def significant(self, alpha: float = ALPHA) -> NDArray[np.bool_]:
+        out: NDArray[np.bool_] = self.p_holm < alpha
         return out
 
     @property

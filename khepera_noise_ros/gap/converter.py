@@ -13,7 +13,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core.khepera import DARK
-from ..effects.base import Array, Key, Row
+from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.fitting import Z_DETECT
 from ..recording import reading_range
 from . import bootstrap
@@ -53,7 +53,7 @@ class Runs:
         self.place[self.order] = np.arange(self.order.size)
 
 
-def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, Array, Array]:
+def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray, Array]:
     """(``x`` with each dropout read as a neighbour's level, (N, C, 2) marks at the lowest
     and highest value, (C, 2) extremes); ``moving``: the light moves within a run."""
     marks = np.zeros(x.shape + (2,), np.float32)
@@ -110,7 +110,7 @@ def _extremes(xt: Array) -> Array:
         return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1)
 
 
-def _local(xo: Array, i: np.ndarray, k: np.ndarray, runs: Runs) -> tuple[Array, ...]:
+def _local(xo: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, ...]:
     """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
     readings at positions ``i`` of channels ``k`` (rows of ``xo``)."""
     value = xo[k, i]
@@ -163,7 +163,7 @@ def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
 
 def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
     """Are positions ``i[j]`` and ``i[j + 1]`` consecutive samples of one run (and group)?"""
-    out = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    out: np.ndarray = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
     return out if group is None else out & (group[1:] == group[:-1])
 
 
@@ -379,7 +379,8 @@ def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
         rec, marks = r.recording, r.marks
         if r.kind == 'closed_loop':
             family, channels = 'closed_loop_dropout', tuple(range(min(8, marks.shape[1])))
-            groups = [(str(c), rec.condition == c) for c in np.unique(rec.condition)]
+            groups: list[tuple[str | None, Any]] = [
+                (str(c), rec.condition == c) for c in np.unique(rec.condition)]
         else:
             family, channels = 'dropout', tuple(rec.channels_used)
             groups = [(None, np.ones(len(rec), bool))]
@@ -458,7 +459,8 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
         values, count = np.unique(x, return_counts=True)
         if values.size == 0 or y.size == 0:
             continue
-        ends = [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])] \
+        ends: list[tuple[Any, ...] | None] = \
+            [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])] \
             if values.size > 1 else [(values[0], count[0], 0)] * 2
         if values.size == 1:      # held at one value: the limit on the side the simulator passes
             ends[int(np.mean(y > values[0]) < np.mean(y < values[0]))] = None
@@ -528,13 +530,13 @@ def dropouts(real: Sequence[Any], sim: Sequence[Any]) -> dict[int, tuple[float, 
     for end in (0, 1):
         excess = hits[:, end] - expected[:, end]
         alone = (hits[:, end] >= MIN_HITS) & (excess > DROP_Z * np.sqrt(var[:, end]))
-        for k in np.flatnonzero(alone):
+        for k in map(int, np.flatnonzero(alone)):
             rate = float(excess[k] / total[k])
             if sensors[k] not in out or rate > out[sensors[k]][1]:
                 out[sensors[k]] = (votes[k][end].most_common(1)[0][0], rate)
         by_value: dict[float, list[int]] = {}
-        for k in np.flatnonzero(hits[:, end] > 0):
-            by_value.setdefault(votes[k][end].most_common(1)[0][0], []).append(int(k))
+        for k in map(int, np.flatnonzero(hits[:, end] > 0)):
+            by_value.setdefault(votes[k][end].most_common(1)[0][0], []).append(k)
         for value, ks in by_value.items():
             if hits[ks, end].sum() >= MIN_HITS and len(ks) > 1 and \
                     excess[ks].sum() > DROP_Z * np.sqrt(var[ks, end].sum()):

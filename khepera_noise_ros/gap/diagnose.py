@@ -23,11 +23,11 @@ import numpy as np
 
 from ..core.noise import ROUNDINGS
 from ..effects import NAMES, Effect, EmpiricalNoise
-from ..effects.base import Array
-from ..effects.base import Candidate
+from ..effects.base import Array, Candidate
+from ..effects.fitting import ALPHA
 from ..recording import Recording
 from . import allan, bootstrap, split
-from .compare import ALPHA, Comparison, entries, localise, paired_p
+from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
 from .select import MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
@@ -236,10 +236,10 @@ def _parsimonious(scored: list[Scored], alpha: float) -> list[Scored]:
     the best (``select.as_good``)."""
     if len(scored) < 2 or scored[0][3] is None:
         return scored
-    best = scored[0]
+    best, best_reps = scored[0], scored[0][3]
     rivals = [s for s in scored[1:] if s[3] is not None
               and free(s[0]['name']) < free(best[0]['name'])
-              and as_good(best[0]['discrepancy_after'], best[3], s[0]['discrepancy_after'],
+              and as_good(best[0]['discrepancy_after'], best_reps, s[0]['discrepancy_after'],
                           s[3], alpha)]
     if not rivals:
         return scored

@@ -22,8 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy import stats as sps
 
-from ..effects.base import Array
-from ..effects.base import Row
+from ..effects.base import Array, Row
 from ..effects.fitting import ALPHA, holm
 from ..recording import Recording
 from .protocol import runs
@@ -225,7 +224,11 @@ def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
     return out
 
 
-def wandering(parts: Any, used: list[int]) -> dict[int, dict[str, Any]]:
+Parts = list[tuple[Array, ...]]
+
+
+def wandering(parts: Callable[[tuple[int, ...]], tuple[Parts, Parts]],
+              used: list[int]) -> dict[int, dict[str, Any]]:
     """The sensors whose own part is more autocorrelated than simulated (Holm at
     ``ALPHA``), found one at a time: the most significant is taken out of the shared part
     (the mean of the others carries their wanders into a steady sensor's own part) and the
@@ -235,7 +238,7 @@ def wandering(parts: Any, used: list[int]) -> dict[int, dict[str, Any]]:
         ex = own_excess(*parts(tuple(shared_by)), used)
         mine = {s: v for s, v in ex.items() if used.index(s) in shared_by}
         sensors = sorted(mine)
-        adjusted = holm(np.array([mine[s]['p'] for s in sensors])) if sensors else []
+        adjusted = holm(np.array([mine[s]['p'] for s in sensors])) if sensors else np.zeros(0)
         left = {s: mine[s] for s, q in zip(sensors, adjusted) if q < ALPHA}
         if not left:
             break
@@ -345,9 +348,9 @@ def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, An
             acc[1] += r.size
     out = []
     for row in rows:
-        acc = sums.get((str(row.key.condition), row.key.part))
-        if acc is not None:
-            real_level = float(acc[0][row.key.sensors[0]] / acc[1])
+        found = sums.get((str(row.key.condition), row.key.part))
+        if found is not None:
+            real_level = float(found[0][row.key.sensors[0]] / found[1])
             row = row._replace(real=real_level, z=(real_level - row.sim) / row.se)
         out.append(row)
     return out

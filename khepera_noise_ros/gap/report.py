@@ -13,18 +13,21 @@ Figures (PNG, matplotlib without a display):
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
 
 from ..files import atomic_write_text, write_json
 from .. import simconfig
 from .diagnose import Diagnosis
+from ..effects.base import Key
 from .compare import MARGIN, Comparison
 
 FIGURES = ('correlation.png', 'spread.png', 'shrink.png', 'effects.png')
 
 
-def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool = True) -> dict:
+def write(diagnosis: Diagnosis, out: str | Path, config: simconfig.SimConfig,
+          figures: bool = True) -> dict[str, Path]:
     """Write every output into directory ``out``; returns {what: path}."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -52,7 +55,7 @@ def write(diagnosis: Diagnosis, out, config: simconfig.SimConfig, figures: bool 
 
 # --- figures ---------------------------------------------------------------------------
 
-def draw(d: Diagnosis, out: Path) -> dict:
+def draw(d: Diagnosis, out: Path) -> dict[str, Path]:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -69,11 +72,11 @@ def draw(d: Diagnosis, out: Path) -> dict:
     return drawn
 
 
-def _family(c: Comparison, family: str):
+def _family(c: Comparison, family: str) -> list[tuple[Key, float, float]]:
     return [(k, r, s) for k, r, s in zip(c.keys, c.real, c.sim) if k.family == family]
 
 
-def _correlation(d: Diagnosis, plt):
+def _correlation(d: Diagnosis, plt: Any) -> Any:
     rows = _family(d.full, 'correlation')
     if not rows:
         return None
@@ -97,7 +100,7 @@ def _correlation(d: Diagnosis, plt):
     return fig
 
 
-def _spread(d: Diagnosis, plt):
+def _spread(d: Diagnosis, plt: Any) -> Any:
     level = {(k.sensors, k.condition, k.part): (r, s) for k, r, s in _family(d.full, 'level')}
     points = [(level[(k.sensors, k.condition, k.part)], (r, s))
               for k, r, s in _family(d.full, 'spread')
@@ -115,14 +118,14 @@ def _spread(d: Diagnosis, plt):
     return fig
 
 
-def _family_discrepancy(c: Comparison) -> dict:
-    out: dict = {}
+def _family_discrepancy(c: Comparison) -> dict[str, float]:
+    out: dict[str, float] = {}
     for k, z in zip(c.keys, c.z):
         out[k.family] = out.get(k.family, 0.0) + max(abs(z) - MARGIN, 0.0) ** 2
     return out
 
 
-def _shrink(d: Diagnosis, plt):
+def _shrink(d: Diagnosis, plt: Any) -> Any:
     if d.held_out_before is None or d.held_out_after is None:
         return None
     before, after = _family_discrepancy(d.held_out_before), \
@@ -143,7 +146,7 @@ def _shrink(d: Diagnosis, plt):
     return fig
 
 
-def _effects(d: Diagnosis, plt):
+def _effects(d: Diagnosis, plt: Any) -> Any:
     if not d.effects:
         return None
     names = [e['name'] for e in d.effects]
@@ -157,7 +160,7 @@ def _effects(d: Diagnosis, plt):
     return fig
 
 
-def _waterfall(d: Diagnosis, plt):
+def _waterfall(d: Diagnosis, plt: Any) -> Any:
     if d.compound is None:
         return None
     steps = d.compound.steps
@@ -181,7 +184,7 @@ def _waterfall(d: Diagnosis, plt):
     return fig
 
 
-def _allan(d: Diagnosis, plt):
+def _allan(d: Diagnosis, plt: Any) -> Any:
     a = d.allan
     if not a:
         return None
@@ -207,7 +210,7 @@ def _allan(d: Diagnosis, plt):
 
 # --- markdown --------------------------------------------------------------------------
 
-def markdown(d: Diagnosis, drawn: dict, paths: dict) -> str:
+def markdown(d: Diagnosis, drawn: dict[str, Path], paths: dict[str, Path]) -> str:
     lines = ['# Sim-to-real gap diagnosis', '', f'**Top effect: `{d.top_effect}`**', '']
     lines += [f'- {n}' for n in d.notes] + ([''] if d.notes else [])
     lines += ['## Inputs', '']
@@ -298,12 +301,12 @@ def markdown(d: Diagnosis, drawn: dict, paths: dict) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def _sensors(sensors) -> str:
+def _sensors(sensors: Sequence[int]) -> str:
     return ' '.join(f's{s}' for s in sensors)
 
 
-def _params(params: dict) -> str:
-    def short(v):
+def _params(params: dict[str, Any]) -> str:
+    def short(v: Any) -> str:
         if isinstance(v, float):
             return f'{v:.4g}'
         if isinstance(v, list):

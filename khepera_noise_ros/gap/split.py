@@ -7,6 +7,8 @@ out whole, so an effect fitted in some lighting is checked in another.
 """
 from __future__ import annotations
 
+from typing import Iterable, Sequence
+
 import numpy as np
 
 from ..recording import Recording
@@ -26,15 +28,17 @@ def by_episode(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return fit, ~fit
 
 
-def by_condition(rec: Recording, held_out) -> tuple[np.ndarray, np.ndarray]:
+def by_condition(rec: Recording, held_out: Iterable[str]) -> tuple[np.ndarray, np.ndarray]:
     out = np.isin(rec.condition, list(held_out))
     return ~out, out
 
 
-def split(recordings: list[Recording], held_out=None) -> tuple[list, list]:
+def split(recordings: Sequence[Recording], held_out: Sequence[str] | None = None
+          ) -> tuple[list[tuple[int, Recording]], list[tuple[int, Recording]]]:
     """(fit, held-out): lists of (index of the source recording, part); a recording with no
     samples on a side is left out of that side."""
-    fit, test = [], []
+    fit: list[tuple[int, Recording]] = []
+    test: list[tuple[int, Recording]] = []
     for i, rec in enumerate(recordings):
         a, b = by_episode(rec) if not held_out else by_condition(rec, held_out)
         if a.any():
@@ -44,7 +48,7 @@ def split(recordings: list[Recording], held_out=None) -> tuple[list, list]:
     return fit, test
 
 
-def check_conditions(recordings: list[Recording], held_out) -> None:
+def check_conditions(recordings: Sequence[Recording], held_out: Sequence[str]) -> None:
     """Every held-out condition must exist, and some condition must remain to fit on."""
     known = sorted({c for r in recordings for c in r.conditions()})
     missing = [c for c in held_out if c not in known]

@@ -12,12 +12,12 @@ import copy
 import dataclasses
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 
 from ..effects import Effect
-from ..effects.base import Array, Key, Row
+from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
 from ..recording import Recording
 from . import bootstrap, closedloop, converter, evidence, stationary
@@ -65,7 +65,7 @@ class Memory:
     own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
-    pairs: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
+    pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], converter.Runs] = field(default_factory=dict)
 
 
@@ -174,7 +174,7 @@ class Target:
                 more_keys, more_cols = converter.stationary_stats(b, s)
                 keys, cols = keys + more_keys, cols + more_cols
         values = np.concatenate([c if c.ndim == 2 else c[:, None] for c in cols], axis=1)
-        return Stats(keys, values)
+        return Stats(tuple(keys), values)
 
     def _simulated(self, effects: Sequence[Effect], replicates: int,
                    kinds: Sequence[str] | None,
@@ -197,8 +197,8 @@ class Target:
             return factor
         code, size, count, cells, cond, real_var, names = self._plan(i, sim, copies)
         x = sim.readings[:, self.channels]
-        means = np.stack([np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])],
-                         axis=1).reshape(len(count), copies, x.shape[1])
+        sums = [np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])]
+        means = cast(Array, np.stack(sums, axis=1)).reshape(len(count), copies, x.shape[1])
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
         spread = np.var(means, axis=1, ddof=1)[cells]
@@ -349,7 +349,7 @@ class TargetEvidence:
             return {}
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
 
-        def parts(shared_by: tuple[int, ...]) -> tuple[list[tuple[Array, ...]], ...]:
+        def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
             mine = []
             for i, rec in enumerate(real):       # the real recordings' own parts once
                 if (i, shared_by) not in t.memory.own:
@@ -386,7 +386,7 @@ class TargetEvidence:
         real = converter.seen_share(t.real_data, sensors)
         sim = converter.seen_share(t.simulate([effect]), sensors)
         rate = converter.rescaled_rate(getattr(effect, 'dropout'), real, sim)
-        return dataclasses.replace(effect, dropout=rate)  # type: ignore[type-var]
+        return dataclasses.replace(effect, dropout=rate)  # type: ignore[call-arg]
 
     def delayed_sensors(self) -> tuple[int, ...]:
         return closedloop.delayed_sensors(self.target.of_kind('closed_loop'))
