@@ -30,11 +30,12 @@ sample (``DRAWS``), so switching an effect on or off never changes the draws
 another effect sees.
 """
 from .config import (ALL_SENSORS, BASES, DRAWS, EFFECT_TYPES, EFFECTS, FORMAT, REAL_ROBOT,
-                     REAL_ROBOT_V1, ActuatorTurnError, CorrelatedNoise, EffectsConfig, IntensityDependentNoise,
-                     SaturationQuantization, SensorGainOffset, SensorLatency, TemporalDrift)
+                     REAL_ROBOT_V1, ActuatorTurnError, CorrelatedNoise, EffectsConfig,
+                     IntensityDependentNoise, SaturationQuantization, SensorGainOffset,
+                     SensorLatency, TemporalDrift)
 from .processes import SensorChain, turn_error
 
 __all__ = ['ALL_SENSORS', 'BASES', 'DRAWS', 'EFFECT_TYPES', 'EFFECTS', 'FORMAT', 'REAL_ROBOT',
-           'REAL_ROBOT_V1', 'ActuatorTurnError', 'CorrelatedNoise', 'EffectsConfig', 'IntensityDependentNoise',
-           'SaturationQuantization', 'SensorGainOffset', 'SensorLatency', 'TemporalDrift',
-           'SensorChain', 'turn_error']
+           'REAL_ROBOT_V1', 'ActuatorTurnError', 'CorrelatedNoise', 'EffectsConfig',
+           'IntensityDependentNoise', 'SaturationQuantization', 'SensorGainOffset',
+           'SensorLatency', 'TemporalDrift', 'SensorChain', 'turn_error']
