@@ -6,8 +6,10 @@ generations of 25), test the best in simulation and in reality, evolve in
 reality (5 generations of 10, seeded from the best) and test the new best in
 reality.  Simulation runs through the node graph and reality is the robot
 emulator through the hardware bridge, unless --backend core (all in process) or
---port (a real Khepera through the bridge).  Every finished piece is saved as
-it ends: run the same command again to resume an interrupted run.
+--port (a real Khepera through the bridge).  With --ceiling, phase 2 also runs
+again from the same bests with the full budget (steps 6-7), to show how much of
+the drop real training can recover.  Every finished piece is saved as it ends:
+run the same command again to resume an interrupted run.
 """
 from __future__ import annotations
 
