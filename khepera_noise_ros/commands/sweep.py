@@ -5,8 +5,10 @@ noise shared within the groups of ``--groupings`` (the rest independent), with
 the default robot's calibration, latency and wheels; plus the positive control,
 reality = the simulator's combination model.  Steps 1-2 run once and are shared
 by every point.  Output: the step-5 difference (combination - independent) with
-its 95% CI per point (table and figure), and a cross-test table (training noise
-model x test world).  In process only (``--backend core``); resumable.
+its 95% CI per point (table and figure), a cross-test table (training noise
+model x test world), and per point the drop at step 3 and what real training
+recovers of it (with ``--ceiling``, also phase 2 at the full budget).  In process
+only (``--backend core``); resumable.
 """
 from __future__ import annotations
 
