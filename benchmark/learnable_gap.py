@@ -1,7 +1,7 @@
 """Why did training on the emulated robot gain nothing, and what robot recovers?
 
 ``python benchmark/learnable_gap.py [--trials 12] [--episodes 20] [--part why,grid,new]``
-(about 4 minutes on one core of this machine; docs/calibration.md holds its tables).
+(about 310 s of CPU on this machine; docs/calibration.md holds its tables).
 
 The replication's steps 3-5 on a set of emulated robots, in process (the core
 simulator, the emulator's world).  Phase-1 bests evolved in simulation under the
