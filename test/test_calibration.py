@@ -9,6 +9,7 @@ from khepera_noise_ros.core.evolution import EAConfig, SteadyStateEA, evolve
 from khepera_noise_ros.core.khepera import World
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.experiment import config as settings
+from khepera_noise_ros.experiment.protocol import play
 from khepera_noise_ros.reality.effects import EffectsConfig
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots
 from khepera_noise_ros.reality.world import CONDITIONS, EmulatedWorld, stationary
@@ -66,33 +67,73 @@ def test_a_controller_evolved_without_noise_loses_measurably_under_ten_percent()
     assert loss - half > 0              # the whole 95% CI of the loss above zero
 
 
-def test_the_default_emulated_robot_opens_a_gap_for_a_fixed_controller():
-    world, episode = World(), task.Task()
-    sim = task.run(baseline.turn_toward_light, SEEDS, len(SEEDS), world,
-                   NoiseModel.independent_only(0.05), episode).mean()
+@pytest.fixture(scope='module')
+def phase1_bests():
+    """Twelve phase-1 bests evolved under the paper's 5% independent noise, and their
+    simulation test (step 2) on 20 episodes each."""
+    noise = NoiseModel.independent_only(0.05)
 
-    def real(effects):
-        emulated = EmulatedWorld(effects, seed=1, robots=len(SEEDS), geometry=world,
-                                 start_bearing_deg=0.0)
-        robots = KheperaRobots(InProcessRobots(emulated), world, episode)
-        readings, total, steps = robots.reset(np.array(SEEDS)), 0.0, 0
-        while readings is not None:
-            direction, power = baseline.turn_toward_light(readings)
-            total = total + task.step_fitness(readings.astype(np.float32), power)
-            steps += 1
-            readings = robots.step(direction, power)
-        return float(np.mean(total / steps))
-    assert sim - real(EffectsConfig.real_robot()) >= 0.05
-    # the gap comes from the robot's effects: without them it closes
-    assert abs(sim - real(EffectsConfig.none(0.05))) < 0.02
+    def evaluate(genomes, seeds):
+        w = network.unpack(genomes)
+        return task.run(lambda r: network.act(w, r), [int(s) for s in seeds], len(seeds),
+                        World(), noise, task.Task())
+    eas = [SteadyStateEA(EAConfig(best='retest'), seed=1000 + t) for t in range(12)]
+    evolve(eas, evaluate)
+    bests = np.array([ea.best_genome for ea in eas])
+    return bests, _test(bests, evaluate)
+
+
+def _test(genomes, evaluate, episodes=20):
+    """Each controller's mean over the same ``episodes`` test episodes."""
+    g = np.repeat(genomes, episodes, axis=0)
+    seeds = np.tile(np.arange(episodes) + 7_000_000, len(genomes))
+    return np.asarray(evaluate(g, seeds), float).reshape(len(genomes), episodes).mean(axis=1)
+
+
+def _steps_3_and_5(bests, effects):
+    """The first real test of the bests, and the real test after the paper's phase 2 (5
+    generations of 10, seeded from each best) on the robot ``effects``."""
+    world = EmulatedWorld(effects, seed=1, robots=240, start_bearing_deg=0.0)
+    robots = KheperaRobots(InProcessRobots(world), World(), task.Task())
+
+    def evaluate(genomes, seeds):
+        return np.concatenate([play(robots, genomes[i:i + 240], seeds[i:i + 240])[0]
+                               for i in range(0, len(seeds), 240)])
+    eas = [SteadyStateEA(EAConfig(population=10, generations=5, best='retest'),
+                         seed=2000 + t, seed_genome=g) for t, g in enumerate(bests)]
+    evolve(eas, evaluate)
+    return _test(bests, evaluate), _test(np.array([ea.best_genome for ea in eas]), evaluate)
+
+
+def test_the_default_robot_opens_a_drop_that_training_on_it_recovers(phase1_bests):
+    """Section 4.4: the first real test drops "dramatically" (at least 0.05 here), and real
+    training recovers most of it (at least half).  Without the robot's effects, no drop."""
+    bests, step2 = phase1_bests
+    step3, step5 = _steps_3_and_5(bests, EffectsConfig.real_robot())
+    drop = step2.mean() - step3.mean()
+    assert drop >= 0.05, drop
+    assert step5.mean() - step3.mean() >= 0.5 * drop, (drop, step5.mean() - step3.mean())
+    plain, _ = _steps_3_and_5(bests[:4], EffectsConfig.none(0.01))
+    assert abs(step2[:4].mean() - plain.mean()) < 0.02
+
+
+def test_the_previous_default_robot_opened_a_drop_its_training_could_not_recover(
+        phase1_bests):
+    """Why it was replaced (benchmark/learnable_gap.py): its whole step of latency and 10%
+    gain spread cost the controllers more than any the EA finds can win back."""
+    bests, step2 = phase1_bests
+    step3, step5 = _steps_3_and_5(bests, EffectsConfig.real_robot_v1())
+    drop = step2.mean() - step3.mean()
+    assert drop >= 0.05 and step5.mean() - step3.mean() < 0.25 * drop, (drop, step5.mean())
 
 
 def test_every_emulated_robot_is_the_same_unit_by_default():
-    world = EmulatedWorld(robots=3)
-    gains = world._chain.chain[0].gains
-    assert np.array_equal(gains[0], gains[1]) and np.array_equal(gains[1], gains[2])
+    def gains(world):
+        return next(p.gains for p in world._chain.chain if hasattr(p, 'gains'))
+    same = gains(EmulatedWorld(robots=3))
+    assert np.array_equal(same[0], same[1]) and np.array_equal(same[1], same[2])
     own = EffectsConfig.real_robot().replace(sensor_gain_offset={'per_robot': True})
-    gains = EmulatedWorld(own, robots=2)._chain.chain[0].gains
+    gains = gains(EmulatedWorld(own, robots=2))
     assert not np.array_equal(gains[0], gains[1])
 
 

@@ -25,6 +25,18 @@ def test_defaults_are_the_papers_experiment():
     assert (c.phase2.population, c.phase2.generations, c.phase2.mutation_range) == (10, 5, 1.0)
     assert (c.task.steps, c.task.perturb_every) == (60, 5)
     assert c.backend == {'simulation': 'graph', 'reality': 'emulator'}
+    assert c.ceiling is None                      # the ceiling arm runs when asked for
+
+
+def test_the_ceiling_arm_is_phase_2_with_the_full_budget_and_keeps_the_hash():
+    plain, arm = config.load(), config.load(overrides={'ceiling': {'enabled': True}})
+    assert (arm.ceiling.population, arm.ceiling.generations) == \
+        (plain.phase1.population, plain.phase1.generations)
+    assert arm.ceiling.mutation_range == plain.phase2.mutation_range
+    assert arm.ceiling.best == plain.phase2.best
+    assert arm.hash == plain.hash                 # resuming with the arm keeps steps 1-5
+    longer = config.load(overrides={'ceiling': {'enabled': True, 'generations': 80}})
+    assert longer.hash != plain.hash and longer.ceiling.generations == 80
 
 
 def test_the_shipped_file_holds_the_defaults():
@@ -78,6 +90,9 @@ def test_the_hash_follows_every_setting():
     ('levels: [{label: 5%, independent: 0.05}]\n', 'must have exactly the keys'),
     ('backend: {simulation: gazebo}\n', "backend.simulation must be one of"),
     ('reality: {effects: {effects: {flicker: {}}}}\n', 'unknown effect'),
+    ('ceiling: {enabled: 1}\n', 'ceiling.enabled must be true or false, got 1'),
+    ('ceiling: {generations: 0}\n', 'ceiling.generations must be an integer >= 1, got 0'),
+    ('ceiling: {budget: 3}\n', "unknown setting 'ceiling.budget'"),
     ('- 1\n', 'must hold a mapping'),
 ])
 def test_bad_settings_are_refused_with_their_name(tmp_path, text, match):

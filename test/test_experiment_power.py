@@ -55,6 +55,18 @@ def test_power_of_no_difference_is_alpha_and_grows_with_difference_and_trials():
     assert pw.power(0.02, 0.05, 10) < pw.power(0.04, 0.05, 10) < pw.power(0.04, 0.05, 30)
 
 
+@pytest.mark.parametrize('sd', [0.016, 0.017, 0.012])
+def test_power_far_in_the_tail_is_a_number(sd):
+    """Fifty trials at the sweep's spreads: scipy's noncentral t (and statsmodels with it)
+    gave NaN there; the power is then above that of a larger spread, and at most 1."""
+    p = pw.power(0.032, sd, 50)
+    wider = SM.power(effect_size=0.032 / 0.02, nobs1=50, alpha=0.05, ratio=1.0,
+                     alternative='two-sided')
+    assert math.isfinite(wider) and pw.power(0.032, 0.02, 50) == pytest.approx(wider)
+    assert math.isfinite(p) and wider < p <= 1.0
+    assert pw.power(-0.032, sd, 50) == pytest.approx(p, abs=1e-12)
+
+
 def test_largest_sd_gives_exactly_the_target_power():
     sd = pw.largest_sd(0.032, 10)
     assert pw.power(0.032, sd, 10) == pytest.approx(0.8, abs=1e-9)

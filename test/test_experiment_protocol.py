@@ -232,3 +232,34 @@ def test_phase_2_re_tests_its_best_on_episodes_apart_from_the_final_test(tmp_pat
     step4 = spy.batches[1:-1]       # step 3 first, step 5 last, phase 2 in between
     evolution = {int(s) for _, seeds in step4 for s in seeds}
     assert evolution and not evolution & tests
+
+
+def test_the_ceiling_arm_trains_the_same_bests_longer_and_tests_them_alike(tmp_path):
+    config = settings.load(overrides={**TINY, 'ceiling': {'enabled': True, 'population': 4,
+                                                          'generations': 3}})
+    store, experiment = run(config, tmp_path)
+    assert list(experiment.steps) == [1, 2, 3, 4, 5, 6, 7]
+    for c in config.conditions:
+        for t in range(config.trials):
+            u = {s: store.load(c.key, t, s) for s in range(1, 8)}
+            assert u[6]['world'] == u[7]['world'] == 'reality'
+            assert u[6]['seed_genome'] == u[1]['best_genome']      # from phase 1's best
+            assert u[7]['genome'] == u[6]['best_genome']
+            assert u[7]['seeds'] == u[5]['seeds'] == u[3]['seeds']  # the same test episodes
+            assert u[6]['evaluations'] == episodes_per_run(config.ceiling) > \
+                u[4]['evaluations'] == episodes_per_run(config.phase2)
+    assert experiment.episodes_left() == {'simulation': 0, 'reality': 0}
+
+
+def test_a_run_resumed_with_the_ceiling_arm_keeps_its_steps_1_to_5(tmp_path):
+    budget = {'population': 4, 'generations': 2}
+    plain = settings.load(overrides={**TINY, 'ceiling': {'enabled': False, **budget}})
+    store, _ = run(plain, tmp_path)
+    files = sorted((tmp_path / 'out').rglob('step*.json'))
+    stamps = {f: f.stat().st_mtime_ns for f in files}
+    arm = settings.load(overrides={**TINY, 'ceiling': {'enabled': True, **budget}})
+    assert arm.hash == plain.hash
+    store, experiment = run(arm, tmp_path)
+    assert all(f.stat().st_mtime_ns == stamps[f] for f in files)
+    assert all(store.load(c.key, t, s) is not None for c in arm.conditions
+               for t in range(arm.trials) for s in (6, 7))

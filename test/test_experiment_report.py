@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from khepera_noise_ros.experiment import report
+from khepera_noise_ros.experiment import config as settings
+from khepera_noise_ros.experiment import recovery, report
 from khepera_noise_ros.experiment.protocol import STEPS
-from test_experiment_protocol import backends, run, tiny
+from test_experiment_protocol import TINY, backends, run, tiny
 
 # Synthetic step scores per condition: 5% combination clearly better at step 5.
 MEANS = {'5% combination': (0.78, 0.77, 0.60, 0.74, 0.80),
@@ -31,6 +32,42 @@ def synthetic(trials=10) -> report.Results:
                                       'best_generation': GENERATIONS[c.name] + t % 3 - 1,
                                       'history': [[0, 0.5, 0.4, 4]]}
     return report.Results(config, units)
+
+
+def with_ceiling(results: report.Results, gain: float) -> report.Results:
+    """``results`` with a ceiling arm whose final test is step 3 + ``gain`` (+ noise)."""
+    config = settings.load(overrides={**TINY, 'trials': results.config.trials,
+                                      'ceiling': {'enabled': True}})
+    rng = np.random.default_rng(9)
+    units = dict(results.units)
+    for c in config.conditions:
+        for t in range(config.trials):
+            value = units[c.key, t, 3]['mean'] + gain + rng.normal(0, 0.01)
+            units[c.key, t, 6] = {'best_fitness': value, 'mean': value, 'world': 'x'}
+            units[c.key, t, 7] = {'best_fitness': value, 'mean': value, 'world': 'x'}
+    return report.Results(config, units)
+
+
+def test_the_drop_and_its_recovery_are_paired_differences_with_t_intervals():
+    results = with_ceiling(synthetic(), gain=0.15)
+    rec = recovery.recovery(results)
+    for c in results.config.conditions:
+        drop = results.scores(c, 2) - results.scores(c, 3)
+        row = rec['rows'][c.name]
+        assert row['drop']['mean'] == pytest.approx(drop.mean())
+        assert (row['drop']['ci_low'], row['drop']['ci_high']) == pytest.approx(
+            sps.t.interval(0.95, drop.size - 1, drop.mean(), sps.sem(drop)))
+        back = results.scores(c, 7) - results.scores(c, 3)
+        assert row['ceiling']['mean'] == pytest.approx(back.mean())
+    every = rec['rows'][recovery.ALL]
+    assert every['drop']['n'] == results.config.trials * len(results.config.conditions)
+    text = recovery.recovery_md(results.config, rec)
+    assert 'ceiling arm' in text and 'had room to show it' in text
+    flat = recovery.recovery_md(results.config, recovery.recovery(
+        with_ceiling(synthetic(), gain=0.0)))
+    assert 'bound to come out flat' in flat
+    plain = recovery.recovery_md(results.config, recovery.recovery(synthetic()))
+    assert '--ceiling' in plain and 'Ceiling step 5' not in plain
 
 
 def test_table1_is_ranked_with_mean_sd_and_ci():

@@ -102,6 +102,21 @@ def test_the_sweep_writes_its_tables_and_resumes_without_recomputing(tmp_path, t
         [p['means']['3'] for p in analysis['points']]
 
 
+def test_the_sweep_with_the_ceiling_arm_says_what_training_recovers(tmp_path, tiny_config):
+    with open(tiny_config, 'a') as f:
+        f.write('ceiling: {population: 3, generations: 2}\n')
+    assert sweep_cli(tmp_path, tiny_config, '--ceiling', '--no-control') == 0
+    analysis = json.loads((tmp_path / 'sweep' / 'sweep.json').read_text())
+    for p in analysis['points']:
+        means, rec = p['means'], p['recovery']
+        drop = np.mean(list(means['2'].values())) - np.mean(list(means['3'].values()))
+        assert rec['drop']['mean'] == pytest.approx(drop)
+        back = np.mean(list(means['7'].values())) - np.mean(list(means['3'].values()))
+        assert rec['ceiling']['mean'] == pytest.approx(back)
+        assert rec['ceiling']['ci_low'] <= rec['ceiling']['mean'] <= rec['ceiling']['ci_high']
+    assert 'ceiling: recovered (7 - 3)' in (tmp_path / 'sweep' / 'sweep.md').read_text()
+
+
 def test_the_control_is_the_simulator_under_the_combination_model():
     base = settings.load(overrides={'trials': 2})
     control = sweep.point_config(base, sweep.Point(None, None, None))

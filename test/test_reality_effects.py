@@ -31,6 +31,16 @@ def test_packaged_emulator_yaml_is_the_real_robot():
     assert EffectsConfig.load(ROOT / 'config' / 'emulator.yaml') == EffectsConfig.real_robot()
 
 
+def test_the_previous_default_robot_stays_reachable():
+    v1 = EffectsConfig.real_robot_v1()
+    assert EffectsConfig.load(ROOT / 'config' / 'emulator_v1.yaml') == v1 != \
+        EffectsConfig.real_robot()
+    assert EffectsConfig.from_dict({'base': 'real_robot_v1'}) == v1
+    assert v1.sensor_latency.strength == 1 and v1.sensor_latency.fraction == 0.0
+    assert v1.actuator_turn_error.dead_band == v1.actuator_turn_error.asymmetry == 0.0
+    assert v1.sensor_gain_offset.strength == 0.1
+
+
 def test_yaml_round_trip(tmp_path):
     config = EffectsConfig.real_robot().only(
         'sensor_latency', 'saturation_quantization',
@@ -67,7 +77,14 @@ def test_a_file_overrides_its_base():
     ({'effects': {'sensor_gain_offset': {'gains': [1, 2]}}},
      'effects.sensor_gain_offset.gains must be null or a list of 8 numbers'),
     ({'sensor_noise': -0.1}, 'sensor_noise must be a number in [0, 1], got -0.1'),
-    ({'base': 'ideal'}, "base must be one of ['none', 'real_robot'], got 'ideal'"),
+    ({'base': 'ideal'},
+     "base must be one of ['none', 'real_robot', 'real_robot_v1'], got 'ideal'"),
+    ({'effects': {'actuator_turn_error': {'asymmetry': 1.5}}},
+     'effects.actuator_turn_error.asymmetry must be a number in [-0.9, 0.9], got 1.5'),
+    ({'effects': {'actuator_turn_error': {'dead_band': -1}}},
+     'effects.actuator_turn_error.dead_band must be a number in [0, 180], got -1'),
+    ({'effects': {'sensor_latency': {'fraction': 2}}},
+     'effects.sensor_latency.fraction must be a number in [0, 1], got 2'),
     ({'format': 'other/1'}, 'format must be'),
     ({'colour': 1}, "unknown key(s) ['colour']")])
 def test_bad_settings_name_the_key_and_value(data, words):
@@ -157,6 +174,33 @@ def test_actuator_turn_error_scales_and_slips():
     assert world.bearing_deg[0] == pytest.approx((actual.sum() + 180) % 360 - 180)
     exact = EmulatedWorld(QUIET)
     assert exact.turn(-7.5)[0] == -7.5 and exact.bearing_deg[0] == -7.5
+
+
+def test_a_dead_band_and_unequal_motors_shape_each_turn():
+    world = EmulatedWorld(QUIET.only('actuator_turn_error', actuator_turn_error={
+        'strength': 0.0, 'scale': 1.0, 'dead_band': 3.0, 'asymmetry': 0.3}))
+    assert world.turn(2.5)[0] == 0.0 and world.turn(-3.0)[0] == 0.0     # too small to start
+    assert world.turn(10.0)[0] == pytest.approx(7.0 * 1.3)               # right: further
+    assert world.turn(-10.0)[0] == pytest.approx(-7.0 * 0.7)             # left: less far
+    assert world.bearing_deg[0] == pytest.approx(7.0 * 1.3 - 7.0 * 0.7)
+
+
+def test_a_measurement_sees_part_of_the_last_turn():
+    config = QUIET.only('sensor_latency', sensor_latency={'strength': 0, 'fraction': 0.25})
+    world, ideal = EmulatedWorld(config), EmulatedWorld(QUIET)
+    world.set_bearing(0.0)
+    ideal.set_bearing(0.0)
+    before = ideal.read(0).astype(float)
+    assert np.array_equal(world.read(0), before)          # placed: no turn to mix
+    assert np.array_equal(world.read(0), before)          # still: nothing changes
+    world.turn(-40.0)
+    ideal.turn(-40.0)
+    after = ideal.read(0).astype(float)
+    mixed = world.read(0)
+    assert np.abs(mixed - (0.25 * before + 0.75 * after)).max() <= 0.5
+    assert not np.array_equal(mixed, after)
+    world.set_bearing(0.0)                                # placed again by hand
+    assert np.array_equal(world.read(0), before)
 
 
 def test_sensor_latency_reports_the_past():

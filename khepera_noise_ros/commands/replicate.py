@@ -6,8 +6,10 @@ generations of 25), test the best in simulation and in reality, evolve in
 reality (5 generations of 10, seeded from the best) and test the new best in
 reality.  Simulation runs through the node graph and reality is the robot
 emulator through the hardware bridge, unless --backend core (all in process) or
---port (a real Khepera through the bridge).  Every finished piece is saved as
-it ends: run the same command again to resume an interrupted run.
+--port (a real Khepera through the bridge).  With --ceiling, phase 2 also runs
+again from the same bests with the full budget (steps 6-7), to show how much of
+the drop real training can recover.  Every finished piece is saved as it ends:
+run the same command again to resume an interrupted run.
 """
 from __future__ import annotations
 
@@ -51,6 +53,11 @@ def add_arguments(parser) -> None:
                         help="measured: 10 test episodes, bests by re-test, reset bearings "
                              "(the default); paper: section 4.4 as written; both: one run of "
                              "each (the paper's in OUT-paper)")
+    parser.add_argument('--ceiling', action='store_true',
+                        help='also run the ceiling arm: phase 2 again from the same phase-1 '
+                             'bests with the full budget (settings key ceiling), to show how '
+                             'much of the drop real training can recover; resumes a run '
+                             'without it')
     parser.add_argument('--trials', type=int, help='trials per condition (overrides the config)')
     parser.add_argument('--seed', type=int, help="the run's seed (overrides the config)")
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
@@ -61,6 +68,8 @@ def run(args) -> int:
         return both_protocols(args)
     overrides = {k: v for k, v in (('trials', args.trials), ('seed', args.seed)) if v is not None}
     overrides['backend'] = backend_choice(args.backend, args.port)
+    if getattr(args, 'ceiling', False):
+        overrides['ceiling'] = {'enabled': True}
     config = settings.load(args.config, quick=args.quick, overrides=overrides,
                            protocol=getattr(args, 'protocol', None))
     out = args.out or default_out(args.quick, getattr(args, 'protocol', None))
@@ -142,14 +151,16 @@ class Progress:
                         bar_format='{desc} {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} '
                                    'episodes [{elapsed}{postfix}]')
 
-    def stage(self, step: int, label: str, world: str, units, generations) -> None:
+    def stage(self, step: int, label: str, world: str, units, generations,
+              steps: int = 5) -> None:
         self.generations, self.world = generations, world
         self._since = time.monotonic()
         conditions = list(dict.fromkeys(c.name for c, _ in units))
         trials = sorted({t + 1 for _, t in units})
         span = f'trial {trials[0]}' if len(trials) == 1 else f'trials {trials[0]}-{trials[-1]}'
         names = ', '.join(conditions) if len(conditions) <= 2 else f'{len(conditions)} conditions'
-        self.bar.set_description_str(f'step {step}/5 {label} | {names}, {span}', refresh=False)
+        self.bar.set_description_str(f'step {step}/{steps} {label} | {names}, {span}',
+                                     refresh=False)
         self._show(None)
 
     def advance(self, episodes: int, generation) -> None:

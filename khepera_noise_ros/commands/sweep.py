@@ -5,8 +5,10 @@ noise shared within the groups of ``--groupings`` (the rest independent), with
 the default robot's calibration, latency and wheels; plus the positive control,
 reality = the simulator's combination model.  Steps 1-2 run once and are shared
 by every point.  Output: the step-5 difference (combination - independent) with
-its 95% CI per point (table and figure), and a cross-test table (training noise
-model x test world).  In process only (``--backend core``); resumable.
+its 95% CI per point (table and figure), a cross-test table (training noise
+model x test world), and per point the drop at step 3 and what real training
+recovers of it (with ``--ceiling``, also phase 2 at the full budget).  In process
+only (``--backend core``); resumable.
 """
 from __future__ import annotations
 
@@ -54,6 +56,9 @@ def add_arguments(parser) -> None:
     parser.add_argument('--no-control', action='store_true',
                         help='leave out the control point (reality = the simulator)')
     parser.add_argument('--trials', type=int, help='trials per condition (default 50)')
+    parser.add_argument('--ceiling', action='store_true',
+                        help='also run the ceiling arm at every point: phase 2 again with the '
+                             'full budget (settings key ceiling); resumes a sweep without it')
     parser.add_argument('--seed', type=int, help="the run's seed (overrides the config)")
     parser.add_argument('--protocol', choices=sorted(settings.PROTOCOLS),
                         help='measurement protocol (default: the config\'s, measured)')
@@ -86,6 +91,8 @@ def run(args) -> int:
                  'backend': {'simulation': 'core', 'reality': 'world'}}
     if args.seed is not None:
         overrides['seed'] = args.seed
+    if getattr(args, 'ceiling', False):
+        overrides['ceiling'] = {'enabled': True}
     base = settings.load(args.config, overrides=overrides, protocol=args.protocol)
     pts = sweep.points(spec)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -156,7 +163,12 @@ def write(out: Path, analysis: dict) -> None:
             '## Step 3 (first real test): combination - independent', '',
             sweep.table(analysis, step=3),
             '## Cross-test: training noise model x test world (mean step-3 score)', '',
-            sweep.cross_table(analysis), '## Settings', '', '```yaml',
+            sweep.cross_table(analysis),
+            '## The drop, and how much of it real training recovers (all conditions)', '',
+            'Paired by trial (the same controllers on the same test episodes); the ceiling '
+            'arm (`--ceiling`) is phase 2 again with the full budget. Where even the ceiling '
+            'recovers nothing, no noise model can transfer better at step 5.', '',
+            sweep.recovery_table(analysis), '## Settings', '', '```yaml',
             yaml.safe_dump(analysis['settings'], sort_keys=False).rstrip(), '```', '']
     (out / 'sweep.md').write_text('\n'.join(text))
     (out / 'sweep.json').write_text(json.dumps(analysis, indent=1, default=str))

@@ -12,6 +12,7 @@ written next to the results, with a hash that the results store checks on resume
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass
@@ -55,6 +56,10 @@ DEFAULTS: dict = {
     # (a mapping for reality.effects.EffectsConfig.from_dict, or the path of such a file)
     # start_bearing_deg: where each real episode starts (null: where the last one ended)
     'reality': {'robots': 100, 'seed': 1, 'effects': {}, 'start_bearing_deg': 0.0},
+    # the ceiling arm (--ceiling): phase 2 again from the same phase-1 bests with this budget,
+    # and its best tested on the same episodes: how much of the drop real training can
+    # recover on this reality at all.  ``enabled`` is not hashed: it adds steps to a run.
+    'ceiling': {'enabled': False, 'population': 25, 'generations': 50},
     'quick': {'trials': 3},
 }
 # Measurement protocols: overrides laid over the defaults (``measured`` is the defaults).
@@ -108,6 +113,7 @@ class ReplicateConfig:
     world: World
     reality: dict
     backend: dict
+    ceiling: EAConfig | None = None       # phase 2 with the ceiling's budget, when enabled
 
     @property
     def effects(self) -> EffectsConfig:
@@ -120,8 +126,11 @@ class ReplicateConfig:
 
     @property
     def hash(self) -> str:
-        """Digest of every setting that changes a result (not the ``quick`` preset)."""
-        text = json.dumps(self.data, sort_keys=True, separators=(',', ':'))
+        """Digest of every setting that changes a result (not the ``quick`` preset, nor
+        whether the ceiling arm runs: a run resumed with it keeps its steps 1-5)."""
+        data = {**self.data, 'ceiling': {k: v for k, v in self.data['ceiling'].items()
+                                         if k != 'enabled'}}
+        text = json.dumps(data, sort_keys=True, separators=(',', ':'))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def to_yaml(self) -> str:
@@ -216,11 +225,24 @@ def build(data: dict) -> ReplicateConfig:
         raise ValueError(f'reality.start_bearing_deg must be null or degrees in [-180, 180], '
                          f'got {start!r}')
     plain['reality']['effects'] = effects_from(plain['reality']['effects']).to_dict()
+    phase2 = _typed(EAConfig, data, 'phase2')
     return ReplicateConfig(
         data=plain, seed=seed, trials=trials, test_episodes=test_episodes, levels=levels,
-        phase1=_typed(EAConfig, data, 'phase1'), phase2=_typed(EAConfig, data, 'phase2'),
+        phase1=_typed(EAConfig, data, 'phase1'), phase2=phase2,
         task=_typed(Task, data, 'task'), world=_typed(World, data, 'world'),
-        reality=plain['reality'], backend=plain['backend'])
+        reality=plain['reality'], backend=plain['backend'],
+        ceiling=_ceiling(plain['ceiling'], phase2))
+
+
+def _ceiling(spec: dict, phase2: EAConfig) -> EAConfig | None:
+    """Phase 2 with the ceiling arm's budget, or None when the arm is off."""
+    if not isinstance(spec['enabled'], bool):
+        raise ValueError(f"ceiling.enabled must be true or false, got {spec['enabled']!r}")
+    _integer(spec, 'population', 2, 'ceiling.')
+    _integer(spec, 'generations', 1, 'ceiling.')
+    budget = dataclasses.replace(phase2, population=spec['population'],
+                                 generations=spec['generations'])
+    return budget if spec['enabled'] else None
 
 
 def _integer(data: dict, name: str, low: int, where: str = '') -> int:

@@ -6,6 +6,11 @@
 4. evolve in reality from a population seeded with phase 1's best (phase 2)
 5. test phase 2's best in reality
 
+and, with the ceiling arm (``config.ceiling``), from the same phase-1 best:
+
+6. evolve in reality with the ceiling's budget (the full budget by default)
+7. test its best in reality, on the test episodes of steps 2, 3 and 5
+
 Every (condition, trial) runs the same step together, so each round of the
 EAs is one batch: one batch per condition in simulation, where each condition
 has its own noise model, and one batch for all conditions in reality.  Every
@@ -38,7 +43,8 @@ Simulate = Callable[[dict[str, Request]], dict[str, np.ndarray]]
 
 STEPS = {1: 'evolve in simulation', 2: 'test in simulation', 3: 'test in reality',
          4: 'evolve in reality', 5: 'test in reality'}
-_PURPOSE = {'phase1': 1, 'phase2': 4, 'test': 2}
+CEILING_STEPS = {6: 'evolve in reality, ceiling budget', 7: 'test in reality, after the ceiling'}
+_PURPOSE = {'phase1': 1, 'phase2': 4, 'test': 2, 'ceiling': 6}
 CHECKPOINT_S = 5.0
 
 
@@ -182,11 +188,12 @@ class Experiment:
         self.progress = progress
         self.checkpoint_s = checkpoint_s
         self.units: list[Unit] = [(c, t) for c in config.conditions for t in range(config.trials)]
+        self.steps = {**STEPS, **(CEILING_STEPS if config.ceiling is not None else {})}
 
     def episodes_left(self) -> dict[str, int]:
         """Episodes still to run in simulation and in reality (for the progress bar)."""
         left = {'simulation': 0, 'reality': 0}
-        for step in STEPS:
+        for step in self.steps:
             left[_world(step)] += sum(self._cost(step) - self._done_in(step, unit)
                                       for unit in self.units)
         return left
@@ -197,11 +204,14 @@ class Experiment:
         self.test(3)
         self.evolve(4)
         self.test(5)
+        if self.config.ceiling is not None:
+            self.evolve(6)
+            self.test(7)
 
     # --- steps -------------------------------------------------------------------------
 
     def evolve(self, step: int) -> None:
-        """Step 1 or 4 for every unit not finished yet, all in one batch per round."""
+        """Step 1, 4 or 6 for every unit not finished yet, all in one batch per round."""
         todo = [u for u in self.units if self._load(u, step) is None]
         if not todo:
             return
@@ -229,7 +239,7 @@ class Experiment:
             self._save(unit, step, evolution_result(ea, step))
 
     def test(self, step: int) -> None:
-        """Step 2, 3 or 5: the best genome so far, on the test episodes of its trial."""
+        """Step 2, 3, 5 or 7: a best genome, on the test episodes of its trial."""
         todo = [u for u in self.units if self._load(u, step) is None]
         if not todo:
             return
@@ -256,7 +266,9 @@ class Experiment:
         if step == 1:
             ea = SteadyStateEA(self.config.phase1, seed=self._seed(unit, 'phase1'))
         else:
-            ea = SteadyStateEA(self.config.phase2, seed=self._seed(unit, 'phase2'),
+            config, purpose = (self.config.phase2, 'phase2') if step == 4 else \
+                (self.config.ceiling, 'ceiling')
+            ea = SteadyStateEA(config, seed=self._seed(unit, purpose),
                                seed_genome=self._genome(unit, step))
         told = self.store.load_checkpoint(condition.key, trial, step)
         replay(ea, told)
@@ -302,8 +314,9 @@ class Experiment:
         return fitness, steps
 
     def _genome(self, unit: Unit, step: int) -> list[float]:
-        """The genome a step starts from: phase 1's best for steps 2-4, phase 2's for 5."""
-        source = self._load(unit, 1 if step <= 4 else 4)
+        """The genome a step starts from: phase 1's best for steps 2-4 and 6, phase 2's for
+        5, the ceiling arm's for 7."""
+        source = self._load(unit, {5: 4, 7: 6}.get(step, 1))
         return source['best_genome']
 
     def _seed(self, unit: Unit, purpose: str, count: int | None = None):
@@ -317,21 +330,22 @@ class Experiment:
 
     def _cost(self, step: int) -> int:
         """Episodes one unit of a step takes."""
-        phase = {1: self.config.phase1, 4: self.config.phase2}.get(step)
+        phase = {1: self.config.phase1, 4: self.config.phase2, 6: self.config.ceiling}.get(step)
         return self.config.test_episodes if phase is None else episodes_per_run(phase)
 
     def _done_in(self, step: int, unit: Unit) -> int:
         if self._load(unit, step) is not None:
             return self._cost(step)
-        if step in (1, 4):
+        if step in (1, 4, 6):
             return len(self.store.load_checkpoint(unit[0].key, unit[1], step))
         return 0
 
     def _stage(self, step: int, todo: list[Unit]) -> None:
         if self.progress is not None:
-            generations = {1: self.config.phase1.generations,
-                           4: self.config.phase2.generations}.get(step)
-            self.progress.stage(step, STEPS[step], _world(step), todo, generations)
+            generations = {1: self.config.phase1, 4: self.config.phase2,
+                           6: self.config.ceiling}.get(step)
+            self.progress.stage(step, self.steps[step], _world(step), todo,
+                                generations and generations.generations, len(self.steps))
 
     def _advance(self, episodes: int, generation: int | None) -> None:
         if self.progress is not None:

@@ -16,7 +16,8 @@ import numpy as np
 from ..files import atomic_write_text, write_json
 from . import figures, stats_report
 from .config import Level, ReplicateConfig
-from .protocol import STEPS
+from .protocol import CEILING_STEPS, STEPS
+from .recovery import recovery, recovery_md, recovery_summary
 from .stats import Summary, describe, rank_test, summarize, ttest
 from .store import Store
 
@@ -30,7 +31,8 @@ PAPER = {
     'figure8': 0.818,
 }
 # The score of a step: the best fitness seen in training, the mean over test episodes.
-SCORE = {1: 'best_fitness', 2: 'mean', 3: 'mean', 4: 'best_fitness', 5: 'mean'}
+SCORE = {1: 'best_fitness', 2: 'mean', 3: 'mean', 4: 'best_fitness', 5: 'mean',
+         6: 'best_fitness', 7: 'mean'}
 COLLAPSE = 0.5       # a final real score below this is a controller that stopped working
 CSV_COLUMNS = ('condition', 'level', 'model', 'trial', 'step', 'what', 'world', 'score',
                'best_generation', 'evaluations')
@@ -42,6 +44,11 @@ class Results:
 
     config: ReplicateConfig
     units: dict
+
+    @property
+    def steps(self) -> dict[int, str]:
+        """The steps run: 1-5, and 6-7 with the ceiling arm."""
+        return {**STEPS, **(CEILING_STEPS if self.config.ceiling is not None else {})}
 
     def scores(self, condition, step: int) -> np.ndarray:
         return np.array([self.units[condition.key, t, step][SCORE[step]]
@@ -55,9 +62,10 @@ class Results:
 def collect(config: ReplicateConfig, store: Store) -> Results:
     """Load the whole run; a missing unit is an error that names it."""
     units = {}
+    steps = {**STEPS, **(CEILING_STEPS if config.ceiling is not None else {})}
     for c in config.conditions:
         for t in range(config.trials):
-            for step in STEPS:
+            for step in steps:
                 unit = store.load(c.key, t, step)
                 if unit is None:
                     raise RuntimeError(f'{c.name} trial {t + 1} step {step} is not finished; '
@@ -76,7 +84,7 @@ def analyse(results: Results, figure8: dict | None) -> dict:
                           for level in config.levels for s in STEPS],
                 'best_generation': [_generation_test(results, level, stats_settings['alpha'])
                                     for level in config.levels],
-                'figure8': figure8}
+                'figure8': figure8, 'recovery': recovery(results)}
     analysis['findings'] = findings(analysis, config)
     return analysis
 
@@ -280,9 +288,9 @@ def _csv(results: Results) -> str:
     writer.writerow(CSV_COLUMNS)
     for c in results.config.conditions:
         for t in range(results.config.trials):
-            for step in STEPS:
+            for step, what in results.steps.items():
                 unit = results.units[c.key, t, step]
-                writer.writerow([c.name, c.level, c.model, t + 1, step, STEPS[step],
+                writer.writerow([c.name, c.level, c.model, t + 1, step, what,
                                  unit['world'], repr(float(unit[SCORE[step]])),
                                  unit.get('best_generation', ''), unit.get('evaluations', '')])
     return buffer.getvalue()
@@ -295,7 +303,8 @@ def _f(x: float, digits: int = 4) -> str:
 def markdown(config: ReplicateConfig, analysis: dict, backends: dict, sessions: list) -> str:
     s = analysis['statistics']
     parts = [_head(config, analysis, backends, sessions), _table1_md(analysis),
-             _steps_md(config, analysis), stats_report.generation_md(analysis['best_generation']),
+             _steps_md(config, analysis), recovery_md(config, analysis['recovery']),
+             stats_report.generation_md(analysis['best_generation']),
              stats_report.power_md(config.trials, analysis['tests'], s['margin'], s['alpha'],
                                    s['target']),
              _figure8_md(config, analysis), _findings_md(analysis), _why_md(config, analysis),
@@ -476,5 +485,6 @@ def summary(analysis: dict) -> str:
     lines = ['Table 1 (final real-world performance, step 5):']
     lines += [f"  {r['rank']}. {r['condition']:<17} {r['mean']:.4f} ± {r['sd']:.4f}   "
               f"paper {_f(r['paper']) if r['paper'] else '-'}" for r in analysis['table1']]
+    lines.append(recovery_summary(analysis['recovery']))
     lines.append(f"Of the paper's findings: {_tally(analysis)}.")
     return '\n'.join(lines) + '\n'

@@ -159,11 +159,13 @@ def scores(store, config: ReplicateConfig, step: int) -> dict[str, list[float]]:
 
 
 def analyse(results: list[tuple[Point, object, ReplicateConfig]]) -> dict:
-    """Per point: every step's means per condition, and per level the step-3 and step-5
-    differences (combination - independent) with their 95% CI."""
+    """Per point: every step's means per condition, per level the step-3 and step-5
+    differences (combination - independent) with their 95% CI, and over all conditions the
+    drop and what real training recovers (``recovery``)."""
     rows = []
     for point, store, config in results:
-        steps = {s: scores(store, config, s) for s in range(1, 6)}
+        steps = {s: scores(store, config, s)
+                 for s in range(1, 8 if config.ceiling is not None else 6)}
         row = {'point': point.key, 'label': point.label, 'shared': point.shared,
                'level': point.level, 'grouping': point.grouping,
                'means': {s: {c: float(np.mean(v)) for c, v in steps[s].items() if v}
@@ -176,8 +178,46 @@ def analyse(results: list[tuple[Point, object, ReplicateConfig]]) -> dict:
                     d, lo, hi = difference_ci(a, b)
                     row['differences'][f'{level.label} step {s}'] = {
                         'difference': d, 'ci_low': lo, 'ci_high': hi, 'n': [len(a), len(b)]}
+        row['recovery'] = recovery(steps)
         rows.append(row)
     return {'points': rows}
+
+
+def recovery(steps: dict[int, dict[str, list[float]]]) -> dict:
+    """Over all conditions, paired by trial: the drop (step 2 - step 3), what phase 2
+    recovers (5 - 3) and, with the ceiling arm, what it recovers (7 - 3); mean and 95% CI."""
+    pairs = {'drop': (2, 3), 'recovered': (5, 3), 'ceiling': (7, 3)}
+    out = {}
+    for name, (a, b) in pairs.items():
+        if a not in steps:
+            continue
+        x = [np.asarray(steps[a][c]) - np.asarray(steps[b][c]) for c in steps[a]
+             if steps[a][c] and len(steps[a][c]) == len(steps[b][c])]
+        if x and sum(len(v) for v in x) >= 2:
+            x = np.concatenate(x)
+            half = float(stats.t.ppf(0.975, x.size - 1)) * x.std(ddof=1) / math.sqrt(x.size)
+            out[name] = {'mean': float(x.mean()), 'ci_low': float(x.mean() - half),
+                         'ci_high': float(x.mean() + half), 'n': int(x.size)}
+    return out
+
+
+def recovery_table(analysis: dict) -> str:
+    """Markdown: per point, the drop at the first real test and what real training recovers
+    of it, with the paper's phase 2 and (when it ran) the ceiling arm."""
+    rows = analysis['points']
+    ceiling = any('ceiling' in r['recovery'] for r in rows)
+    head = ['reality', 'step 3', 'drop (2 - 3) [95% CI]', 'recovered (5 - 3) [95% CI]']
+    head += ['ceiling: recovered (7 - 3) [95% CI]'] if ceiling else []
+    lines = ['| ' + ' | '.join(head) + ' |', '|' + ' --- |' * len(head)]
+    for r in rows:
+        step3 = np.mean(list(r['means'][3].values())) if r['means'][3] else float('nan')
+        cells = [r['label'], f'{step3:.3f}']
+        for name in ('drop', 'recovered') + (('ceiling',) if ceiling else ()):
+            d = r['recovery'].get(name)
+            cells.append('' if d is None else '{:+.3f} [{:+.3f}, {:+.3f}]'.format(
+                d['mean'], d['ci_low'], d['ci_high']))
+        lines.append('| ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines) + '\n'
 
 
 def table(analysis: dict, step: int = 5) -> str:

@@ -148,13 +148,16 @@ class EmulatedWorld:
         self._world_id[rows] = self._world_list.index(world)
         if self.start_bearing_deg is not None:
             self._bearing[rows] = self.start_bearing_deg
+        self._chain.placed(rows)
 
     def set_bearing(self, deg, robot=None) -> None:
         """Put the lamp at ``deg`` in the robot's frame (the experimenter turns the robot)."""
         deg = np.asarray(deg, np.float64)
         if not np.isfinite(deg).all():
             raise ValueError(f'bearing must be finite degrees, got {deg}')
-        self._bearing[self._rows(robot)] = deg
+        rows = self._rows(robot)
+        self._bearing[rows] = deg
+        self._chain.placed(rows)
 
     def turn(self, deg, robot=None) -> np.ndarray:
         """Turn in place by ``deg`` commanded degrees, positive clockwise (right), which

@@ -4,6 +4,8 @@ The simulator perturbs an ideal reading with the paper's noise model.  A real
 Khepera's readings come out of a chain of physical processes instead; the
 emulator runs that chain, in this order, on the light each sensor receives:
 
+  (sensor_latency)           a measurement integrates its light over a window that
+                             overlaps the end of the last turn (``fraction``)
   sensor_gain_offset         each sensor's own gain on the light and dark offset
                              (a fixed calibration of the unit)
   temporal_drift             slow AR(1) wander of the gain (warm-up, supply, daylight)
@@ -13,10 +15,11 @@ emulator runs that chain, in this order, on the light each sensor receives:
                              (a common supply/reference per group)
   sensor noise               each sensor's own noise, uniform +-``sensor_noise`` of the
                              reading: the paper's independent noise, always on
-  sensor_latency             a sensor reports what it measured some samples ago
+  sensor_latency             a sensor reports what it measured ``strength`` samples ago
   saturation_quantization    clipping and coarse quantisation of the converter
 and, on the wheels, ``actuator_turn_error``: a turn's rotation differs from the
-one commanded by a scale (wheel slip on the floor) and a random part.
+one commanded by a dead band (static friction), a scale (wheel slip on the floor),
+unequal motors (``asymmetry``) and a random part.
 
 Every effect has ``enabled`` and ``strength`` and, where it makes sense, a
 ``location`` (sensors, or groups of sensors); the names are those the gap
@@ -26,12 +29,13 @@ Randomness arrives as a fixed block of standard normal draws per robot and
 sample (``DRAWS``), so switching an effect on or off never changes the draws
 another effect sees.
 """
-from .config import (ALL_SENSORS, DRAWS, EFFECT_TYPES, EFFECTS, FORMAT, REAL_ROBOT,
-                     ActuatorTurnError, CorrelatedNoise, EffectsConfig, IntensityDependentNoise,
-                     SaturationQuantization, SensorGainOffset, SensorLatency, TemporalDrift)
+from .config import (ALL_SENSORS, BASES, DRAWS, EFFECT_TYPES, EFFECTS, FORMAT, REAL_ROBOT,
+                     REAL_ROBOT_V1, ActuatorTurnError, CorrelatedNoise, EffectsConfig,
+                     IntensityDependentNoise, SaturationQuantization, SensorGainOffset,
+                     SensorLatency, TemporalDrift)
 from .processes import SensorChain, turn_error
 
-__all__ = ['ALL_SENSORS', 'DRAWS', 'EFFECT_TYPES', 'EFFECTS', 'FORMAT', 'REAL_ROBOT',
-           'ActuatorTurnError', 'CorrelatedNoise', 'EffectsConfig', 'IntensityDependentNoise',
-           'SaturationQuantization', 'SensorGainOffset', 'SensorLatency', 'TemporalDrift',
-           'SensorChain', 'turn_error']
+__all__ = ['ALL_SENSORS', 'BASES', 'DRAWS', 'EFFECT_TYPES', 'EFFECTS', 'FORMAT', 'REAL_ROBOT',
+           'REAL_ROBOT_V1', 'ActuatorTurnError', 'CorrelatedNoise', 'EffectsConfig',
+           'IntensityDependentNoise', 'SaturationQuantization', 'SensorGainOffset',
+           'SensorLatency', 'TemporalDrift', 'SensorChain', 'turn_error']

@@ -117,6 +117,27 @@ class Latency:
         return np.where(self.mask, past, level)
 
 
+class Smear:
+    """sensor_latency's fraction: the light a measurement integrates while the last turn
+    ends, a mix of the light before the turn and after it (a stationary robot: no change)."""
+
+    def __init__(self, effect: SensorLatency, robots: int):
+        self.fraction = effect.fraction
+        self.mask = _mask(effect.location)
+        self.last = np.full((robots, SENSORS), np.nan)
+
+    def apply(self, level, z, rows):
+        last = self.last[rows]
+        last = np.where(np.isnan(last), level, last)
+        self.last[rows] = level
+        mixed = self.fraction * last + (1.0 - self.fraction) * level
+        return np.where(self.mask, mixed, level)
+
+    def placed(self, rows) -> None:
+        """A robot placed by hand is still when it is next read: nothing to mix."""
+        self.last[rows] = np.nan
+
+
 class Converter:
     """saturation_quantization: round to the converter's step, then saturate."""
 
@@ -136,6 +157,8 @@ class SensorChain:
     def __init__(self, config: EffectsConfig, robots: int, start: np.ndarray):
         c = config
         chain = []
+        if c.sensor_latency.enabled and c.sensor_latency.fraction > 0:
+            chain.append(Smear(c.sensor_latency, robots))
         if c.sensor_gain_offset.enabled:
             chain.append(Calibration(c.sensor_gain_offset, robots))
         if c.temporal_drift.enabled:
@@ -152,6 +175,12 @@ class SensorChain:
             chain.append(Converter(c.saturation_quantization))
         self.chain = chain
 
+    def placed(self, rows) -> None:
+        """The experimenter has placed these robots (processes that care forget the turn)."""
+        for process in self.chain:
+            if hasattr(process, 'placed'):
+                process.placed(rows)
+
     def measure(self, light: np.ndarray, z: np.ndarray, rows) -> np.ndarray:
         """(n, 8) integer readings 0..525 from ideal readings ``light`` (n, 8) and draws
         ``z`` (n, DRAWS) of the robots ``rows``."""
@@ -166,4 +195,6 @@ def turn_error(effect: ActuatorTurnError, deg, z) -> np.ndarray:
     deg = np.asarray(deg, np.float64)
     if not effect.enabled:
         return deg
-    return deg * effect.scale + effect.strength * np.abs(deg) * z
+    deg = np.sign(deg) * np.maximum(np.abs(deg) - effect.dead_band, 0.0)
+    sided = np.where(deg > 0, 1.0 + effect.asymmetry, 1.0 - effect.asymmetry)
+    return deg * effect.scale * sided + effect.strength * np.abs(deg) * z
