@@ -1,23 +1,5 @@
-"""The statistics of closed-loop recordings, from per-episode sums (episodes are the blocks).
-
-The task's own: ``closed_loop_level`` per sensor; the fitness factors and the turn
-power by step after a knock; the share of right turns; the regression of the readings'
-next change on the commands u(t) and u(t-1) (``turn_response``, per sensor
-``sensor_turn_response``); with recorded headings the turn per unit of command
-(``turn_size``).  The turn's scatter by band of power (``turn_scatter``, with headings
-``turn_size_scatter``): a zero-mean random slip leaves means alone and shows there.
-The noise while the robot turns (family ``loop_<view>_<spread|correlation|
-autocorrelation>``), in three views:
-
-* ``still``: first differences where the last command did not turn the robot and no
-  knock came (the light did not move; headings need not be known);
-* ``residual`` (headings recorded): readings less a fit in heading and the two turns
-  around it within (condition, 10-degree bin) cells, each sensor at the delay (0..3
-  steps) whose heading fits it best, so that a latency leaves its noise visible;
-* ``change`` (no stationary recording, headings unknown): each reading's next change
-  less its regression on the last four commands and their products with every reading
-  (the light's part); the residual is two noise draws.
-"""
+"""The statistics of closed-loop recordings from per-episode sums: levels, fitness factors,
+turn responses and scatter, and the noise while turning in three views (docs/diagnosis.md)."""
 from __future__ import annotations
 
 from typing import Callable

@@ -1,8 +1,5 @@
-"""The sensor's converter in each sensor's value distribution: dropouts (isolated readings
-at a sensor's extreme, far from their neighbours; repaired before any other statistic,
-compared by a count test), piles at a limit, and the value lattice; their statistics and
-the evidence ``saturation_quantization`` is fitted to.  docs/diagnosis.md gives the rules.
-"""
+"""The sensor's converter in each sensor's value distribution: dropouts (repaired before
+any other statistic, compared by a count test), piles at a limit, the value lattice."""
 from __future__ import annotations
 
 import functools

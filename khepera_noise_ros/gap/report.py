@@ -1,15 +1,4 @@
-"""The diagnosis written out: diagnosis.json, report.md with figures, and fitted_params.yaml.
-
-Figures (PNG, matplotlib without a display):
-  correlation.png   real and simulated correlation matrices side by side, per condition
-  spread.png        spread against light level, every sensor and cell, real and simulated
-  shrink.png        held-out discrepancy per statistic family before and after the top effect
-  effects.png       held-out reduction of every candidate effect
-  waterfall.png     the compound: each chosen effect's added and cumulative held-out shrink,
-                    and the empirical remainder model's beside them
-  allan.png         Allan deviation of the residuals over averaging time, per sensor and
-                    for the shared component, real and simulated (``gap.allan``)
-"""
+"""The diagnosis written out: diagnosis.json, report.md with its figures, fitted_params.yaml."""
 from __future__ import annotations
 
 from pathlib import Path

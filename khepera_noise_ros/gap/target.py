@@ -1,11 +1,5 @@
-"""Real recordings held against the simulator, with or without added effects.
-
-A ``Target`` computes the real statistics once and replays the recordings' protocols on
-demand: ``compare`` (bootstrap variance on both sides) and ``objective`` (what a fit
-minimises: simulated estimates only, common random numbers).  What repeated simulations
-share lives in one ``Memory`` held by the target and its copies, nothing anywhere else;
-``evidence`` is what an effect's fitter sees (``effects.base.Evidence``).
-"""
+"""Real recordings held against the simulator: the real statistics once, replays on demand,
+their caches in one ``Memory``, and the ``Evidence`` a fitter sees."""
 from __future__ import annotations
 
 import copy
