@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..core.noise import ROUNDINGS
-from ..effects import NAMES, Effect, EmpiricalNoise
+from ..effects import DEFAULT, Effect, EmpiricalNoise
 from ..effects.base import Array, Candidate
 from ..effects.fitting import ALPHA
 from ..recording import Recording
@@ -37,7 +37,7 @@ class Options:
     reduction_alpha: float = REDUCTION_ALPHA    # one-sided, for "does the effect shrink it"
     min_reduction: float = MIN_REDUCTION
     replicates: int = bootstrap.REPLICATES
-    effects: tuple[str, ...] = NAMES
+    effects: tuple[str, ...] = DEFAULT
     where_limit: int = 40
     compound: bool = True         # forward selection of a set of effects after the best one
     remainder: bool = True        # describe what is left and fit the empirical model
@@ -107,9 +107,9 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     """
     check(recordings)
     o = options
-    unknown = [n for n in o.effects if n not in NAMES]
+    unknown = [n for n in o.effects if n not in DEFAULT]
     if unknown:
-        raise ValueError(f'unknown effect(s) {unknown}; the vocabulary is {list(NAMES)}')
+        raise ValueError(f'unknown effect(s) {unknown}; the vocabulary is {list(DEFAULT)}')
     notes = _base_notes(recordings, o.base)
     full = Target(recordings, o.config, o.seed, o.base, replicates=o.replicates)
     c_full = full.compare()
