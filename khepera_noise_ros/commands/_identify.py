@@ -14,12 +14,14 @@ TURNS = 4                  # turns per placement, right and left in turn
 POWERS = range(1, 10)
 
 
-def sweep_headings(step: float, world: dict[str, Any]) -> list[float]:
+def sweep_headings(step: float, world: dict[str, Any], passes: int = 2) -> list[float]:
     """The sweep's headings in a condition: every ``step`` degrees round the circle with
-    the lamp on, straight ahead alone with it off."""
+    the lamp on, straight ahead alone with it off; each pass the other way round (so that
+    alternate placements, the diagnosis's split, give each part every heading)."""
     if float(world.get('lamp_distance_mm', 0.0)) >= LAMP_OFF_MM:
-        return [0.0]
-    return [float(h) for h in np.arange(-180.0, 180.0, step)]
+        return [0.0] * passes
+    once = [float(h) for h in np.arange(-180.0, 180.0, step)]
+    return [h for k in range(passes) for h in (once if k % 2 == 0 else once[::-1])]
 
 
 def turn_policy(power: int, rest: int) -> Callable[[np.ndarray], tuple[int, int]]:

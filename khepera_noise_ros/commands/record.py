@@ -146,9 +146,11 @@ def add_arguments(parser) -> None:
     s.add_argument('--headings', type=float, nargs='+', default=[0.0], metavar='DEG',
                    help='lamp bearings to record at (0 = straight ahead, CCW positive)')
     s.add_argument('--samples', type=int, default=None,
-                   help='samples per condition and heading (default 60; sweep: 20)')
+                   help='samples per condition and heading (default 60; sweep: 10)')
     s.add_argument('--sweep-step', type=float, default=10.0, metavar='DEG',
                    help='sweep: degrees between headings where the lamp is on')
+    s.add_argument('--sweep-passes', type=int, default=2, metavar='N',
+                   help='sweep: times round the circle, each the other way')
     s.add_argument('--period', type=float, default=1.0,
                    help='sample period, s (the paper: 1 s); see --pace')
     s.add_argument('--ask', action='store_true',
@@ -182,8 +184,8 @@ def run(args) -> int:
     if args.protocol == 'closed-loop' and args.genome is None:
         raise UsageError('the closed-loop protocol needs --genome')
     if args.samples is None:
-        args.samples = 20 if args.protocol == 'sweep' else 60
-    for name in ('samples', 'episodes', 'steps', 'turn_repeats'):
+        args.samples = 10 if args.protocol == 'sweep' else 60
+    for name in ('samples', 'episodes', 'steps', 'turn_repeats', 'sweep_passes'):
         if getattr(args, name) < 1:
             raise UsageError(f'--{name.replace("_", "-")} must be >= 1, got '
                              f'{getattr(args, name)}')
@@ -324,10 +326,10 @@ def _stationary(args, recorder, executor, params, source, done: _Episodes) -> No
     conditions = parse_conditions(args.conditions)
     manifest = _base_manifest(args, params, source, 'stationary')
     if args.protocol == 'sweep':
-        manifest.update(sweep_step_deg=args.sweep_step)
+        manifest.update(sweep_step_deg=args.sweep_step, sweep_passes=args.sweep_passes)
 
         def headings(world: dict) -> list:
-            return _identify.sweep_headings(args.sweep_step, world)
+            return _identify.sweep_headings(args.sweep_step, world, args.sweep_passes)
     else:
         def headings(world: dict) -> list:
             return list(args.headings)

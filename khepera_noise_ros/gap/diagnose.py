@@ -9,11 +9,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..core.noise import ROUNDINGS
-from ..effects import DEFAULT, Effect, EmpiricalNoise
+from ..effects import DEFAULT, WORLD_MODEL, Effect, EmpiricalNoise
 from ..effects.base import Array, Candidate
 from ..effects.fitting import ALPHA
 from ..recording import Recording
-from . import allan, bootstrap, split
+from . import allan, bootstrap, identify, split
 from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
@@ -64,10 +64,17 @@ class Diagnosis:
     empirical: Effect | None = None  # the empirical model, when it brings the simulator closer
     allan: dict[str, Any] | None = None
     rounding: dict[str, Any] | None = None
+    world: identify.World | None = None   # the world model's parts, in the simulator
 
     @property
     def fitted_effects(self) -> list[Effect]:
-        """What fitted_params.yaml loads: the compound set, else the top effect."""
+        """What fitted_params.yaml loads: the world identified, then the compound set (else
+        the top effect)."""
+        return ([] if self.world is None else list(self.world.effects)) + self.named_effects
+
+    @property
+    def named_effects(self) -> list[Effect]:
+        """The effects chosen beside the world: the compound set, else the top effect."""
         if self.compound is not None:
             return list(self.compound.effects)
         return [] if self.fitted is None else [self.fitted]
@@ -86,6 +93,7 @@ class Diagnosis:
                 'localisation': self.localisation,
                 'compound': None if self.compound is None else self.compound.to_json(),
                 'remainder': self.remainder, 'allan': self.allan, 'rounding': self.rounding,
+                'world': None if self.world is None else self.world.to_json(),
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -131,8 +139,14 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    block_lengths=[full.block_lengths[i] for i, _ in part],
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
+    world = identify.world_model(a, b, b.compare(), o.effects, log) if significant else None
+    if world is not None:         # the simulator identified: its world, then the effects
+        result.world = world
+        notes.append(f'the world identified: {", ".join(e.name for e in world.effects)} '
+                     f'remove {1 - world.after / world.before:.0%} of the held-out discrepancy')
+        a, b = (t.with_config(t.config.with_effects(*world.effects)) for t in (a, b))
     c_a = a.compare()
-    candidates = [fit_one(n, a, c_a) for n in o.effects]
+    candidates = [fit_one(n, a, c_a) for n in o.effects if n not in WORLD_MODEL]
     result.held_out_before = before = b.compare()
     d_before = before.discrepancy
     before_reps = b.replicate_discrepancies(before)
@@ -330,7 +344,7 @@ def _late_rounding(result: Diagnosis, a: Target, b: Target, o: Options) -> tuple
 
 def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:
     """What the named effects leave on held-out data, and the empirical model of it."""
-    named = result.fitted_effects
+    named = result.named_effects
     after = result.held_out_after if named and result.held_out_after is not None \
         else result.held_out_before
     assert after is not None
