@@ -19,6 +19,8 @@ from ..core.khepera import DARK, TENTHS
 from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, param, rows
 from .fitting import ALPHA, holm, names
 
+SPARSE = 12           # fewer bearings than this round the circle leave the shape a guess
+
 
 @dataclass(frozen=True)
 class LightResponse(Effect):
@@ -106,10 +108,13 @@ class LightResponse(Effect):
         effect = cls(tuple(located), tuple(float(b) for b in bearings),
                      tuple(float(worlds[c].lamp_distance_mm) for c in conditions),
                      tuple(float(worlds[c].ambient) for c in conditions), tuple(values))
-        text = '; '.join(f'{c}: ' + ', '.join(f'{b:g}' for b in sorted(
-            {b for cc, b, _ in cells if cc == c})) for c in conditions)
+        seen = {c: sorted({b for cc, b, _ in cells if cc == c}) for c in conditions}
+        text = '; '.join(f'{c}: ' + ', '.join(f'{b:g}' for b in seen[c]) for c in conditions)
+        sparse = [c for c in conditions if 1 < len(seen[c]) < SPARSE]
         return Candidate(cls.name, effect, f'levels of {names(located)} differ in shape from '
-                                           f'the light model; bearings seen (deg) {text}')
+                                           f'the light model; bearings seen (deg) {text}' + (
+            f'; between so few bearings in {", ".join(sparse)} the shape is a guess: record '
+            f'--protocol sweep' if sparse else ''))
 
 
 def around(x: Array, knots: Array, values: Array) -> Array:
@@ -136,16 +141,17 @@ def _bearing(r: Row) -> float | None:
 
 def _misshapen(levels: list[Row]) -> list[int]:
     """Sensors whose levels stay off after the best line through the model's levels (a
-    gain and offset): chi-square of the line's residuals, Holm."""
+    gain and offset): chi-square of the line's residuals, Holm; the residuals' z scaled by
+    their robust spread over all sensors where that exceeds 1 (short runs understate the
+    levels' errors, and a misfit of few sensors leaves the median to the others)."""
     sensors = sorted({r.key.sensors[0] for r in levels})
-    p = []
+    residuals: dict[int, tuple[Array, int]] = {}
     for s in sensors:
         mine = [r for r in levels if r.key.sensors[0] == s]
         real, sim, se = (np.array(v, np.float64) for v in zip(*[(r.real, r.sim, r.se)
                                                                 for r in mine]))
         se = np.maximum(se, 0.3)
         if real.size < 3:
-            p.append(1.0)
             continue
         if np.ptp(sim) < 1:
             line: Array = sim + float(np.average(real - sim, weights=se ** -2))
@@ -153,6 +159,12 @@ def _misshapen(levels: list[Row]) -> list[int]:
         else:
             line = np.asarray(np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim), np.float64)
             dof = real.size - 2
-        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof)))
-    adjusted = holm(np.array(p)) if p else np.array([])
-    return [s for s, q in zip(sensors, adjusted) if q < ALPHA]
+        residuals[s] = ((real - line) / se, dof)
+    if not residuals:
+        return []
+    scale = max(1.0, 1.4826 * float(np.median(np.abs(np.concatenate(
+        [z for z, _ in residuals.values()])))))
+    located = sorted(residuals)
+    p = holm(np.array([float(sps.chi2.sf(((residuals[s][0] / scale) ** 2).sum(),
+                                         residuals[s][1])) for s in located]))
+    return [s for s, q in zip(located, p) if q < ALPHA]

@@ -99,8 +99,11 @@ class SensorResponse(Effect):
             delay, bright, dark = _analytic([r for r in steps if r.key.sensors[0] in slow])
             how = 'step responses' + (' after turns' if steps[-1].key.family.startswith(
                 'turn') else ' after changes of heading')
+            # sensors whose responses agree with the fit are taken to share it; those
+            # nobody could time too, when every one that could be timed does
             timed = {r.key.sensors[0] for r in steps}
-            if timed <= set(slow):      # every sensor that could be timed is slow: all are
+            slow = sorted(set(slow) | (timed - _faster(steps, delay, bright, dark)))
+            if set(slow) >= timed:
                 slow = sorted(set(slow) | set(evidence.channels))
         else:
             turned = {r.key.sensors[0] for r in evidence.rows('sensor_turn_response')
@@ -159,6 +162,18 @@ def _analytic(steps: list[Row]) -> tuple[float, float, float]:
         if cost < best[0]:
             best = (cost, float(d), rate['bright'], rate['dark'])
     return best[1], best[2], best[3]
+
+
+def _faster(steps: list[Row], delay: float, bright: float, dark: float) -> set[int]:
+    """Sensors with a step response the fitted one does not explain (beyond ``Z_DETECT``)."""
+    out = set()
+    for r in steps:
+        part = str(r.key.part)
+        rate = dark if 'dark' in part else bright if 'bright' in part else (bright + dark) / 2
+        model = response(delay, rate, int(part.split()[1]) + 1)[-1]
+        if abs(r.real - model) > Z_DETECT * max(r.se, 0.01):
+            out.add(r.key.sensors[0])
+    return out
 
 
 def _through_loop(evidence: Evidence, sensors: tuple[int, ...]) -> tuple[float, float, float]:

@@ -194,7 +194,7 @@ def _compound(result: Diagnosis, a: Target, b: Target,
     before = result.held_out_before
     assert before is not None
     c = result.compound = Selection(a, b, before, before.discrepancy).run(
-        best, o.effects, before_reps, log)
+        best, [n for n in o.effects if n not in WORLD_MODEL], before_reps, log)
     if o.rounding and len(c.effects) > 1 and result.rounding and \
             result.rounding['rounding'] == result.rounding['given']:
         a, b = _late_rounding(result, a, b, o)

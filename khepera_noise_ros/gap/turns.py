@@ -14,7 +14,7 @@ COMMANDS = tuple(range(-9, 0)) + tuple(range(1, 10))     # signed powers, + to t
 MIN_TURNS = 4                    # rows a command's statistics need in the full data
 BEFORE, AFTER, SETTLED = 2, 8, 4     # rests around a turn: before, after, the last settled
 SAMPLES = 3                      # samples after a turn whose settling is compared
-MIN_CHANGE = 100.0 * SAMPLES     # squared change a sensor's settling needs (as stationary)
+MIN_CHANGE = 100.0     # mean squared change a sensor's settling needs (10 readings a turn)
 SIDES = ('bright', 'dark')
 Part = Callable[[bootstrap.Blocks, Array, int, str], tuple[list[Key], list[Array]]]
 
@@ -63,7 +63,7 @@ def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.n
     ``AFTER`` rows after in one run of steps; per side of each sensor's change, the
     products (reading after - settled)(before - settled) and (before - settled)^2."""
     dd = np.zeros((episodes, 2, SAMPLES, r.shape[1]))
-    d2 = np.zeros((episodes, 2, r.shape[1]))
+    d2, n = np.zeros((episodes, 2, r.shape[1])), np.zeros((episodes, 2, r.shape[1]))
     t = lone(u, ep, steps, knock)
     if t.size:
         old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
@@ -73,9 +73,10 @@ def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.n
         sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
         e = np.broadcast_to(ep[t][:, None], change.shape)
         np.add.at(d2, (e, side, sensor), change ** 2)
+        np.add.at(n, (e, side, sensor), 1.0)
         for j in range(SAMPLES):
             np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
-    return {'tc_dd': dd, 'tc_d2': d2}
+    return {'tc_dd': dd, 'tc_d2': d2, 'tc_n': n}
 
 
 def lone(u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray) -> np.ndarray:
@@ -117,9 +118,10 @@ def stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], lis
                     keys.append(Key('turn_by_command_scatter', (), c, part))
                     cols.append(sd[:, j])
         dd, d2 = b.part(s, 'tc_dd')[:, i], b.part(s, 'tc_d2')[:, i]
+        n = b.part(s, 'tc_n')[0, i]
         for side, label in enumerate(SIDES):
             for k in range(d2.shape[-1]):
-                if d2[0, side, k] < MIN_CHANGE:
+                if n[side, k] < MIN_TURNS or d2[0, side, k] < MIN_CHANGE * n[side, k]:
                     continue
                 for j in range(SAMPLES):
                     keys.append(Key('turn_step_response', (k,), c,
