@@ -141,11 +141,16 @@ def stock_genome(seed: int) -> np.ndarray:
 
 
 def summary(result) -> dict:
-    c = result.compound
-    before = result.held_out_before.discrepancy if result.held_out_before else None
-    return {'before': before,
-            'after': c.discrepancy_after if c else before,
-            'reduction': c.reduction if c else 0.0,
+    """Held-out discrepancy of the stock simulator, with the world identified, and with
+    the compound beside it."""
+    c, w = result.compound, result.world
+    start = result.held_out_before.discrepancy if result.held_out_before else 0.0
+    before = w.before if w is not None else start
+    after = c.discrepancy_after if c else start
+    return {'before': before, 'world': w.after if w is not None else None, 'after': after,
+            'reduction': 1.0 - after / before if before > 0 else 0.0,
+            'world_effects': [e.to_dict() for e in w.effects] if w is not None else [],
+            'world_notes': w.notes if w is not None else {},
             'chosen': [(s['name'], s['sensors'], round(s['cumulative_reduction'], 3))
                        for s in c.steps] if c else [],
             'notes': {e['name']: e['note'] for e in result.effects}}
@@ -165,10 +170,12 @@ def run(name: str, seed: int, episodes: int, genome: np.ndarray) -> dict:
             options = dataclasses.replace(options, effects=effects)
         out[label] = summary(diagnose.diagnose(recordings, options))
         out[label]['cpu_s'] = time.process_time() - t0
-        print(f"{name} {label}: held-out discrepancy {out[label]['before']:.0f} -> "
-              f"{out[label]['after']:.0f} ({out[label]['reduction']:.1%} removed) "
-              f"{[c[0] for c in out[label]['chosen']]} ({out[label]['cpu_s']:.0f} s CPU)",
-              flush=True)
+        o = out[label]
+        world = '' if o['world'] is None else \
+            f"world {[e['name'] for e in o['world_effects']]} -> {o['world']:.0f}, "
+        print(f"{name} {label}: held-out discrepancy {o['before']:.0f} -> {world}"
+              f"{o['after']:.0f} ({o['reduction']:.1%} removed) "
+              f"{[c[0] for c in o['chosen']]} ({o['cpu_s']:.0f} s CPU)", flush=True)
     return out
 
 

@@ -85,7 +85,7 @@ class LightResponse(Effect):
             return Candidate(cls.name, None, 'no levels from the light model to compare')
         # the levels as read (a shape no line explains also moves the runs' shared factors,
         # so they are not divided out as a change over time)
-        located = _misshapen(levels)
+        located = _misshapen(levels, evidence.rows('spread'))
         if not located:
             return Candidate(cls.name, None, 'every sensor\'s levels follow the light model '
                                              'up to a calibration')
@@ -139,19 +139,23 @@ def _bearing(r: Row) -> float | None:
     return float((b + 180.0) % 360.0 - 180.0)
 
 
-def _misshapen(levels: list[Row]) -> list[int]:
+def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
     """Sensors whose levels stay off after the best line through the model's levels (a
-    gain and offset): chi-square of the line's residuals, Holm; the residuals' z scaled by
-    their robust spread over all sensors where that exceeds 1 (short runs understate the
-    levels' errors, and a misfit of few sensors leaves the median to the others)."""
-    sensors = sorted({r.key.sensors[0] for r in levels})
-    residuals: dict[int, tuple[Array, int]] = {}
+    gain and offset): chi-square of the line's residuals, Holm.  A level's error is at
+    least its cell's spread times the median ratio of the two over the cells (short runs
+    let the bootstrap understate some cells' errors)."""
+    spread = {r.key: r.real for r in spreads}
+    ratio = [r.se / spread[k] for r in levels
+             if (k := r.key._replace(family='spread')) in spread and spread[k] > 0]
+    typical = float(np.median(ratio)) if ratio else 0.0
+    p, sensors = [], sorted({r.key.sensors[0] for r in levels})
     for s in sensors:
         mine = [r for r in levels if r.key.sensors[0] == s]
-        real, sim, se = (np.array(v, np.float64) for v in zip(*[(r.real, r.sim, r.se)
-                                                                for r in mine]))
-        se = np.maximum(se, 0.3)
+        real, sim, se = (np.array(v, np.float64) for v in zip(*[(
+            r.real, r.sim, max(r.se, 0.3, typical * spread.get(
+                r.key._replace(family='spread'), 0.0))) for r in mine]))
         if real.size < 3:
+            p.append(1.0)
             continue
         if np.ptp(sim) < 1:
             line: Array = sim + float(np.average(real - sim, weights=se ** -2))
@@ -159,12 +163,6 @@ def _misshapen(levels: list[Row]) -> list[int]:
         else:
             line = np.asarray(np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim), np.float64)
             dof = real.size - 2
-        residuals[s] = ((real - line) / se, dof)
-    if not residuals:
-        return []
-    scale = max(1.0, 1.4826 * float(np.median(np.abs(np.concatenate(
-        [z for z, _ in residuals.values()])))))
-    located = sorted(residuals)
-    p = holm(np.array([float(sps.chi2.sf(((residuals[s][0] / scale) ** 2).sum(),
-                                         residuals[s][1])) for s in located]))
-    return [s for s, q in zip(located, p) if q < ALPHA]
+        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof)))
+    adjusted = holm(np.array(p)) if p else np.array([])
+    return [s for s, q in zip(sensors, adjusted) if q < ALPHA]
