@@ -12,7 +12,8 @@ its headings known as an emulator reports them.  The diagnosis (the stock simula
 ``SimConfig()``) runs twice on the same recordings: with the unmodelled effects only
 (the vocabulary before issue 26) and with the world model's parts too (the default).
 Printed per robot: the held-out discrepancy before any effect and after each compound,
-and the effects chosen.  Nothing here is tuned to these robots; they only record.
+and the effects chosen (``--untracked``: headings known only at placements, as a real
+Khepera records).  Nothing here is tuned to these robots; they only record.
 """
 from __future__ import annotations
 
@@ -156,11 +157,21 @@ def summary(result) -> dict:
             'notes': {e['name']: e['note'] for e in result.effects}}
 
 
-def run(name: str, seed: int, episodes: int, genome: np.ndarray) -> dict:
+def untracked(rec: Recording) -> Recording:
+    """As a robot that does not know its heading records: the placements' alone."""
+    rec.heading_deg = np.where(rec.step == 0, rec.heading_deg, np.nan) \
+        if rec.manifest.get('calibration') else np.full(len(rec), np.nan)
+    return rec
+
+
+def run(name: str, seed: int, episodes: int, genome: np.ndarray,
+        tracked: bool = True) -> dict:
     world = world_of(name, seed)
     t0 = time.process_time()
     recordings = [sweep(world, seed), turn_calibration(world, seed + 1000),
                   closed_loop(world, genome, seed + 2000, episodes)]
+    if not tracked:
+        recordings[1:] = [untracked(r) for r in recordings[1:]]
     out = {'robot': name, 'samples': [len(r) for r in recordings],
            'record_cpu_s': time.process_time() - t0}
     for label, effects in (('unmodelled', NAMES), ('world', None)):
@@ -184,10 +195,12 @@ def main(argv=None) -> int:
     p.add_argument('robots', nargs='*', default=['emulator'])
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--episodes', type=int, default=40)
+    p.add_argument('--untracked', action='store_true',
+                   help='headings unknown but at the placements, as on a real Khepera')
     p.add_argument('--out', type=Path)
     args = p.parse_args(argv)
     genome = stock_genome(args.seed)
-    rows = [run(r, args.seed, args.episodes, genome) for r in args.robots]
+    rows = [run(r, args.seed, args.episodes, genome, not args.untracked) for r in args.robots]
     if args.out:
         args.out.write_text(json.dumps(rows, indent=1, default=float) + '\n')
     return 0

@@ -88,7 +88,7 @@ class LightResponse(Effect):
         located = _misshapen(levels, evidence.rows('spread'))
         if not located:
             return Candidate(cls.name, None, 'every sensor\'s levels follow the light model '
-                                             'up to a calibration')
+                                             'up to a calibration and its noise')
         worlds = evidence.worlds()
         cells: dict[tuple[str, float, int], Row] = {}
         for r in levels:
@@ -141,16 +141,20 @@ def _bearing(r: Row) -> float | None:
 
 def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
     """Sensors whose levels stay off after the best line through the model's levels (a
-    gain and offset): chi-square of the line's residuals, Holm.  A level's error is at
-    least its cell's spread times the median ratio of the two over the cells (short runs
-    let the bootstrap understate some cells' errors)."""
+    gain and offset): chi-square of the line's residuals, Holm, and by more than the
+    sensor's own noise (the median spread of its cells; a misfit below it a controller
+    cannot tell from noise, and noise clipped at a limit moves a mean that much).  A
+    level's error is at least its cell's spread times the median ratio of the two over
+    the cells (short runs let the bootstrap understate some cells' errors)."""
     spread = {r.key: r.real for r in spreads}
     ratio = [r.se / spread[k] for r in levels
              if (k := r.key._replace(family='spread')) in spread and spread[k] > 0]
     typical = float(np.median(ratio)) if ratio else 0.0
-    p, sensors = [], sorted({r.key.sensors[0] for r in levels})
+    p, sensors, small = [], sorted({r.key.sensors[0] for r in levels}), set()
     for s in sensors:
         mine = [r for r in levels if r.key.sensors[0] == s]
+        noise = float(np.median([spread.get(r.key._replace(family='spread'), 0.0)
+                                 for r in mine]))
         real, sim, se = (np.array(v, np.float64) for v in zip(*[(
             r.real, r.sim, max(r.se, 0.3, typical * spread.get(
                 r.key._replace(family='spread'), 0.0))) for r in mine]))
@@ -164,5 +168,7 @@ def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
             line = np.asarray(np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim), np.float64)
             dof = real.size - 2
         p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof)))
+        if float(np.sqrt(np.mean((real - line) ** 2))) < noise:
+            small.add(s)
     adjusted = holm(np.array(p)) if p else np.array([])
-    return [s for s, q in zip(sensors, adjusted) if q < ALPHA]
+    return [s for s, q in zip(sensors, adjusted) if q < ALPHA and s not in small]
