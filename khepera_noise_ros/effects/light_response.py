@@ -2,9 +2,10 @@
 
 A table per lighting condition (as Webots' ``lookupTable``): the robot's level at each
 knot bearing, interpolated round the circle (Akima's local cubic from four knots on,
-linear below), replacing the world's response of the sensors it names.  The fit: the
-real levels at the recorded headings (``level``), on the sensors whose levels no line
-through the model's (a calibration) explains.
+linear below), replacing the world's response of the sensors it names; or, where the
+bearings were too few for a shape (``between='model'``), the world's response plus the
+difference interpolated linearly.  The fit: the real levels at the recorded headings
+(``level``), on the sensors whose levels no line through the model's explains.
 """
 from __future__ import annotations
 
@@ -41,6 +42,8 @@ class LightResponse(Effect):
                                         low=0.0, high=DARK)
     levels: tuple[float, ...] = param((500.0,), 'level per condition, sensor and knot',
                                       'floats', low=-DARK, high=2 * DARK)
+    between: str = param('level', "between knots: the table's levels, or the world's "
+                         'response plus the difference', choices=('level', 'model'))
 
     def inconsistency(self) -> str:
         c, s, k = len(self.lamps), len(self.sensors), len(self.bearings)
@@ -74,8 +77,15 @@ class LightResponse(Effect):
             return out
         grid = np.arange(table.shape[1]) * (360.0 / table.shape[1])
         levels = np.reshape(self.levels, (len(self.lamps), len(self.sensors), -1))[c]
+        knots = np.asarray(self.bearings)
+        at = np.rint(np.mod(knots, 360.0) * table.shape[1] / 360.0).astype(int) \
+            % table.shape[1]
         for i, s in enumerate(rows(self.sensors, table.shape[0])):
-            out[s] = around(grid, np.asarray(self.bearings), levels[i])
+            if self.between == 'level':
+                out[s] = around(grid, knots, levels[i])
+            else:
+                out[s] += np.interp(grid, np.mod(knots, 360.0), levels[i] - out[s, at],
+                                    period=360.0)
         return out
 
     @classmethod
@@ -97,24 +107,36 @@ class LightResponse(Effect):
                 cells[(str(r.key.condition), b, r.key.sensors[0])] = r
         conditions = sorted({c for c, _, _ in cells})
         bearings = np.array(sorted({b for _, b, _ in cells}))
+        seen = {c: sorted({b for cc, b, _ in cells if cc == c}) for c in conditions}
+        stock = {c: np.asarray(worlds[c].light_table(rounded=False), np.float64)
+                 for c in conditions}
+        # a shape needs bearings enough wherever the lamp lights some sensor differently
+        sparse = [c for c in conditions if len(seen[c]) < SPARSE
+                  and np.ptp(stock[c][located], axis=1).max() > 1.0]
+        at = np.rint(np.mod(bearings, 360.0) * 10).astype(int) % TENTHS
         values: list[float] = []
         for cond in conditions:
-            stock = np.asarray(worlds[cond].light_table(rounded=False), np.float64)
             for s in located:       # the model's light corrected by what the robot read
-                seen = sorted((b, float(stock[s, int(round(b * 10)) % TENTHS]) + r.real - r.sim)
-                              for (c, b, k), r in cells.items() if c == cond and k == s)
-                values += [round(float(v), 2) for v in around(
-                    bearings, np.array([b for b, _ in seen]), np.array([v for _, v in seen]))]
+                mine = sorted((b, float(stock[cond][s, int(round(b * 10)) % TENTHS]) +
+                               r.real - r.sim) for (c, b, k), r in cells.items()
+                              if c == cond and k == s)
+                b, v = np.array([b for b, _ in mine]), np.array([v for _, v in mine])
+                if sparse:
+                    tabled = stock[cond][s, at] + np.interp(np.mod(bearings, 360.0), np.mod(
+                        b, 360.0), v - stock[cond][s, np.rint(np.mod(b, 360.0) * 10).astype(
+                            int) % TENTHS], period=360.0)
+                else:
+                    tabled = around(bearings, b, v)
+                values += [round(float(x), 2) for x in tabled]
         effect = cls(tuple(located), tuple(float(b) for b in bearings),
                      tuple(float(worlds[c].lamp_distance_mm) for c in conditions),
-                     tuple(float(worlds[c].ambient) for c in conditions), tuple(values))
-        seen = {c: sorted({b for cc, b, _ in cells if cc == c}) for c in conditions}
+                     tuple(float(worlds[c].ambient) for c in conditions), tuple(values),
+                     'model' if sparse else 'level')
         text = '; '.join(f'{c}: ' + ', '.join(f'{b:g}' for b in seen[c]) for c in conditions)
-        sparse = [c for c in conditions if 1 < len(seen[c]) < SPARSE]
+        guess = f'; between so few bearings in {", ".join(sparse)} the model\'s shape is ' \
+            f'kept: record --protocol sweep' if sparse else ''
         return Candidate(cls.name, effect, f'levels of {names(located)} differ in shape from '
-                                           f'the light model; bearings seen (deg) {text}' + (
-            f'; between so few bearings in {", ".join(sparse)} the shape is a guess: record '
-            f'--protocol sweep' if sparse else ''))
+                                           f'the light model; bearings seen (deg) {text}{guess}')
 
 
 def around(x: Array, knots: Array, values: Array) -> Array:

@@ -8,5 +8,6 @@
   converter   dropouts, limits, the lattice            bootstrap   the block bootstrap
   replay      a protocol in the simulator              protocol    what a recording is
   split       fit and held-out parts                   allan       Allan deviation
-  report      diagnosis.json, report.md, figures
+  identify    the world model's parts, first           turns       turn statistics per command
+  turncal     the turn calibration's replay and turns  report      diagnosis.json, report.md
 """

@@ -17,7 +17,7 @@ from . import allan, bootstrap, identify, split
 from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
-from .select import MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
+from .select import MIN_ADDED, MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -166,9 +166,11 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
             scored = rank(b)
     result.effects = [s[0] for s in scored]
     best_entry, best_cmp, best_effect, best_reps = scored[0] if scored else (None,) * 4
+    # beside an identified world the effects refine it: the first needs the compound's share
+    least = o.min_reduction if world is None else MIN_ADDED
     if significant and best_entry is not None:
         if best_effect is not None and best_cmp is not None and best_reps is not None and \
-                best_entry['heldout_reduction'] >= o.min_reduction and \
+                best_entry['heldout_reduction'] >= least and \
                 best_entry['p_value'] < o.reduction_alpha:
             result.top_effect, result.fitted = best_entry['name'], best_effect
             result.held_out_after = best_cmp
@@ -181,7 +183,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
             notes.append(f'no effect explains a significant part of the gap: the best, '
                          f'{best_entry["name"]}, removes {best_entry["heldout_reduction"]:.0%} '
                          f'of the held-out discrepancy, p = {best_entry["p_value"]:.3f} (needs '
-                         f'{o.min_reduction:.0%}, p < {o.reduction_alpha})')
+                         f'{least:.0%}, p < {o.reduction_alpha})')
     if significant and o.remainder:
         _remainder(result, a, b, d_before, o)
     return result

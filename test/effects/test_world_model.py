@@ -99,7 +99,7 @@ def lobe(axis: float, width: float) -> np.ndarray:
 NARROW = LightResponse((1, 2), KNOTS, (5.0,), (500.0,),
                        tuple(np.round(np.r_[lobe(45.0, 25.0), lobe(10.0, 20.0)], 2)))
 EXAMPLES = [NARROW, LightResponse((4,), (0.0, 90.0), (5.0, 130.0), (500.0, 500.0),
-                                  (100.0, 480.0, 300.0, 490.0)),
+                                  (100.0, 480.0, 300.0, 490.0), 'model'),
             SensorResponse((0, 1, 2), 0.6, 0.3, 0.5), SensorResponse((3,), 1.4),
             ActuatorResponse(3.0, 0.9, 0.2, (3.0, 9.0, 27.0), (0.5, 1.0, 1.1), 0.1, 0.5),
             ActuatorResponse(1.0, 1.1, -0.1, knocks=False)]
@@ -248,3 +248,19 @@ def test_the_plain_simulator_gives_none_and_missing_protocols_are_named():
         assert fitted(cls, plain).effect is None
     cand = fitted(LightResponse, [recorded(sweep(step=45.0, samples=20), [NARROW])])
     assert cand.effect is not None and 'record --protocol sweep' in cand.note
+
+
+def test_with_few_bearings_the_table_keeps_the_world_s_shape_between_them():
+    cand = fitted(LightResponse, [recorded(sweep(step=90.0, samples=30), [NARROW])])
+    effect = cand.effect
+    assert isinstance(effect, LightResponse) and effect.between == 'model', cand.note
+    assert "the model's shape is kept: record --protocol sweep" in cand.note
+    table, own = light_table(World(), [effect]), light_table(World())
+    knots = np.rint(np.mod(effect.bearings, 360.0) * 10).astype(int) % TENTHS
+    truth = light_table(World(), [NARROW])
+    np.testing.assert_allclose(table[1:3, knots], truth[1:3, knots], atol=4.0)
+    # between the knots the difference to the world is linear: the world's shape stays
+    bend = np.abs(np.diff(table[1] - own[1], 2))           # at grid points 1 .. TENTHS - 2
+    away = np.ones(TENTHS - 2, bool)
+    away[np.clip(knots - 1, 0, TENTHS - 3)] = False
+    assert bend[away].max() < 1e-3 and bend[~away].max() > 1e-3
