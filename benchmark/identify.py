@@ -13,7 +13,9 @@ its headings known as an emulator reports them.  The diagnosis (the stock simula
 (the vocabulary before issue 26) and with the world model's parts too (the default).
 Printed per robot: the held-out discrepancy before any effect and after each compound,
 and the effects chosen (``--untracked``: headings known only at placements, as a real
-Khepera records).  Nothing here is tuned to these robots; they only record.
+Khepera records; ``--fit-noise``: against the paper's noise model fitted to the sweep, as
+``khepera-noise fit`` does, instead of the stock one).  Nothing here is tuned to these
+robots; they only record.
 """
 from __future__ import annotations
 
@@ -165,7 +167,7 @@ def untracked(rec: Recording) -> Recording:
 
 
 def run(name: str, seed: int, episodes: int, genome: np.ndarray,
-        tracked: bool = True) -> dict:
+        tracked: bool = True, fit_noise: bool = False) -> dict:
     world = world_of(name, seed)
     t0 = time.process_time()
     recordings = [sweep(world, seed), turn_calibration(world, seed + 1000),
@@ -174,9 +176,15 @@ def run(name: str, seed: int, episodes: int, genome: np.ndarray,
         recordings[1:] = [untracked(r) for r in recordings[1:]]
     out = {'robot': name, 'samples': [len(r) for r in recordings],
            'record_cpu_s': time.process_time() - t0}
+    config = SimConfig()
+    if fit_noise:           # the paper's model fitted to the sweep (khepera-noise fit)
+        from khepera_noise_ros.experiment import noisefit
+        fitted = noisefit.fit(recordings[0], config, seed, level_dependence=False)
+        config = dataclasses.replace(config, noise=fitted.noise_model())
+        out['noise'] = dataclasses.asdict(config.noise)
     for label, effects in (('unmodelled', NAMES), ('world', None)):
         t0 = time.process_time()
-        options = diagnose.Options(config=SimConfig(), seed=seed)
+        options = diagnose.Options(config=config, seed=seed)
         if effects is not None:
             options = dataclasses.replace(options, effects=effects)
         out[label] = summary(diagnose.diagnose(recordings, options))
@@ -197,10 +205,13 @@ def main(argv=None) -> int:
     p.add_argument('--episodes', type=int, default=40)
     p.add_argument('--untracked', action='store_true',
                    help='headings unknown but at the placements, as on a real Khepera')
+    p.add_argument('--fit-noise', action='store_true',
+                   help='diagnose against the paper\'s noise model fitted to the sweep')
     p.add_argument('--out', type=Path)
     args = p.parse_args(argv)
     genome = stock_genome(args.seed)
-    rows = [run(r, args.seed, args.episodes, genome, not args.untracked) for r in args.robots]
+    rows = [run(r, args.seed, args.episodes, genome, not args.untracked, args.fit_noise)
+            for r in args.robots]
     if args.out:
         args.out.write_text(json.dumps(rows, indent=1, default=float) + '\n')
     return 0
