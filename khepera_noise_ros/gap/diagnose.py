@@ -240,7 +240,7 @@ def _parsimonious(scored: list[Scored], alpha: float) -> list[Scored]:
     if len(scored) < 2 or scored[0][3] is None:
         return scored
     best, best_reps = scored[0], scored[0][3]
-    rivals = [s for s in scored[1:] if s[3] is not None
+    rivals = [s for s in scored[1:] if s[3] is not None and s[0]['heldout_reduction'] > 0
               and free(s[0]['name']) < free(best[0]['name'])
               and as_good(best[0]['discrepancy_after'], best_reps, s[0]['discrepancy_after'],
                           s[3], alpha)]
