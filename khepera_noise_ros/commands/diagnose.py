@@ -18,8 +18,8 @@ import numpy as np
 from ..core import evolution
 from ..effects import NAMES
 from .. import simconfig
-from ..experiment import transfer
-from ..gap import diagnose, report
+from ..experiment import diagnosis_report, transfer
+from ..gap import diagnose
 from ..gap.protocol import BASES, condition_world, kind
 from ..recording import load
 
@@ -75,7 +75,7 @@ def run(args) -> int:
                                        [result.fitted], reality, args.transfer_trials,
                                        ea=ea, seed=args.seed)
         result.transfer['condition'] = label
-    paths = report.write(result, args.out, config, figures=not args.no_figures)
+    paths = diagnosis_report.write(result, args.out, config, figures=not args.no_figures)
     _print(result, paths)
     return 0
 

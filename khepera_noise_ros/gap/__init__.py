@@ -8,5 +8,4 @@
   converter   dropouts, limits, the lattice            bootstrap   the block bootstrap
   replay      a protocol in the simulator              protocol    what a recording is
   split       fit and held-out parts                   allan       Allan deviation
-  report      diagnosis.json, report.md, figures
 """

@@ -8,9 +8,9 @@ import numpy as np
 
 from ..files import atomic_write_text, write_json
 from .. import simconfig
-from .diagnose import Diagnosis
+from ..gap.diagnose import Diagnosis
 from ..effects.base import Key
-from .compare import MARGIN, Comparison
+from ..gap.compare import MARGIN, Comparison
 
 FIGURES = ('correlation.png', 'spread.png', 'shrink.png', 'effects.png')
 
