@@ -2,8 +2,9 @@
 groups, found from the data).
 
 The groups: sensors merged by average linkage of the evidence that their fast noise is
-shared beyond the simulator's (a z per pair, ``Evidence.group_evidence``), while the
-mean evidence between two clusters stays above the threshold.  The strength: from the
+shared beyond the simulator's (a z per pair, ``Evidence.group_evidence``) while the link
+exceeds chance: the Bonferroni threshold over the pairs, widened by the spread of the
+same evidence between the simulator and itself (``Evidence.group_null``).  The strength: from the
 excess covariance within the groups, refined by the simulator; a shared noise of a
 fixed size in readings (a supply, a converter) is tried as well.
 """
