@@ -61,6 +61,7 @@ class Memory:
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], converter.Runs] = field(default_factory=dict)
+    real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
 
 
 class Target:
@@ -259,8 +260,10 @@ class Target:
 
     def _objective(self, effects: Sequence[Effect], kinds: Sequence[str] | None,
                    families: frozenset[str] | None, margin: float, limits: bool) -> float:
-        chosen = self._chosen(kinds)
-        real = Stats.join([self._real[i] for i in chosen])
+        chosen = tuple(self._chosen(kinds))
+        if chosen not in self.memory.real:
+            self.memory.real[chosen] = Stats.join([self._real[i] for i in chosen])
+        real = self.memory.real[chosen]
         n = sum(len(r) for r in self.recordings)
         copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
