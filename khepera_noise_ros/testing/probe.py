@@ -1,13 +1,16 @@
-"""Helpers for the node tests: a probe node that plays the other end of the topics."""
+"""Helpers for the node tests: a probe node that plays the other end of the lockstep topics,
+a listener that subscribes to a robot's sensors as a user's node would, node factories."""
 from __future__ import annotations
 
 import threading
 import time
 from typing import Callable
 
+import numpy as np
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64, Float64MultiArray, Int32MultiArray
 
 from khepera_noise_ros.nodes import protocol
@@ -105,6 +108,39 @@ class Probe(Node):
         future = client.set_parameters([Parameter(k, value=v) for k, v in values.items()])
         assert wait_for(future.done), f'no answer from {node_name}/set_parameters'
         return future.result().results
+
+
+class Listener(Node):
+    """Subscribes to light_sensor_0..7 and the lockstep light, as a user's node would."""
+
+    def __init__(self, context, namespace: str = ''):
+        super().__init__('listener', context=context, namespace=namespace)
+        self.lock = threading.Lock()
+        self.sensors: list[list[Illuminance]] = [[] for _ in range(8)]
+        self.light: list = []
+        for n in range(8):
+            self.create_subscription(Illuminance, f'light_sensor_{n}',
+                                     lambda msg, n=n: self._keep(self.sensors[n], msg), 10)
+        self.create_subscription(Float64MultiArray, protocol.LIGHT,
+                                 lambda msg: self._keep(self.light, msg), protocol.QOS)
+
+    def _keep(self, into: list, msg) -> None:
+        with self.lock:
+            into.append(msg)
+
+    def steps(self) -> dict:
+        """{stamp: 8 Illuminance messages} for the steps all eight sensors arrived for."""
+        with self.lock:
+            by_stamp: dict = {}
+            for n, messages in enumerate(self.sensors):
+                for msg in messages:
+                    key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+                    by_stamp.setdefault(key, [None] * 8)[n] = msg
+        return {k: v for k, v in by_stamp.items() if None not in v}
+
+    def robot0_light(self) -> list[np.ndarray]:
+        with self.lock:
+            return [protocol.unpack_light(m).values[0] for m in self.light]
 
 
 def valid(messages, unpack) -> list[protocol.Batch]:

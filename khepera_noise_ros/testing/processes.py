@@ -9,8 +9,6 @@ import time
 from pathlib import Path
 from typing import Callable
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def start_time(pid: int) -> int | None:
     """The process's start time in clock ticks (tells it from a later one with the same pid),
@@ -96,9 +94,10 @@ def command(*args: str) -> list[str]:
     return [sys.executable, '-m', 'khepera_noise_ros.cli', *args]
 
 
-def start(args: list[str], domain: int, cwd=None, **kwargs) -> subprocess.Popen:
+def start(args: list[str], domain: int, **kwargs) -> subprocess.Popen:
+    """``args`` on ROS domain ``domain``, in the current directory unless ``cwd`` is given."""
     kwargs = {'stdout': subprocess.PIPE, 'stderr': subprocess.PIPE, **kwargs}
-    return subprocess.Popen(args, env=env(domain), cwd=cwd or ROOT, text=True, **kwargs)
+    return subprocess.Popen(args, env=env(domain), text=True, **kwargs)
 
 
 def stop(proc: subprocess.Popen, how: int, timeout: float = 10.0) -> tuple[int | None, float]:
@@ -113,6 +112,7 @@ def stop(proc: subprocess.Popen, how: int, timeout: float = 10.0) -> tuple[int |
 
 
 def kill(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    """SIGKILL ``proc`` if it still runs, reap it and close its pipes."""
+    with proc:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL)

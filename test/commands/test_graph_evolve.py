@@ -2,14 +2,14 @@
 import json
 from pathlib import Path
 
-from conftest import next_domain_id
+from khepera_noise_ros.testing.domains import next_domain_id
 from khepera_noise_ros import cli
 from khepera_noise_ros.core import evolution
 from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Task
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 def test_graph_evolve_from_a_parameter_file_equals_the_core(tmp_path, monkeypatch, capsys):

@@ -6,7 +6,7 @@ import pytest
 from khepera_noise_ros.core.noise import DEFAULT_GROUPS
 from khepera_noise_ros.experiment import config
 
-SHIPPED = Path(__file__).resolve().parents[1] / 'config' / 'replicate.yaml'
+SHIPPED = Path(__file__).resolve().parents[2] / 'config' / 'replicate.yaml'
 
 
 def test_defaults_are_the_papers_experiment():

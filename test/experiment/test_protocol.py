@@ -3,59 +3,11 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.core.evaluation import CoreEvaluator
-from khepera_noise_ros.experiment import config as settings
 from khepera_noise_ros.core.evolution import SteadyStateEA
 from khepera_noise_ros.experiment.protocol import STEPS, Backends, ConditionEpisodes, \
-    Experiment, chunked, chunked_trace, core_simulate, episodes_per_run, per_condition, play, \
-    seed_for
+    Experiment, core_simulate, episodes_per_run, per_condition, seed_for
 from khepera_noise_ros.experiment.store import Store
-from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots
-from khepera_noise_ros.reality.world import EmulatedWorld
-
-TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 3},
-        'phase2': {'population': 3, 'generations': 2}, 'task': {'steps': 12},
-        'reality': {'robots': 8}, 'backend': {'simulation': 'core', 'reality': 'world'}}
-
-
-def tiny(**changes) -> settings.ReplicateConfig:
-    return settings.load(overrides=settings.merge(TINY, changes, 'test')
-                         if changes else TINY)
-
-
-class Spy:
-    """Wraps an evaluator and remembers every batch it was given."""
-
-    def __init__(self, evaluate):
-        self.evaluate, self.batches = evaluate, []
-
-    def __call__(self, genomes, seeds):
-        self.batches.append((np.array(genomes), np.array(seeds)))
-        return self.evaluate(genomes, seeds)
-
-    @property
-    def episodes(self) -> int:
-        return sum(len(s) for _, s in self.batches)
-
-
-def backends(config, reality_spy=True, simulate=None, traced=False) -> Backends:
-    """The core simulator and the emulated world in process, as ``--backend core``."""
-    world = EmulatedWorld(config.effects, seed=config.reality['seed'],
-                          robots=config.reality['robots'], geometry=config.world)
-    robots = KheperaRobots(InProcessRobots(world), config.world, config.task)
-    capacity = config.reality['robots']
-    reality = chunked(lambda g, s: play(robots, g, s)[0], capacity)
-    trace = chunked_trace(lambda g, s: play(robots, g, s)[1], capacity) if traced else None
-    noise = {c.key: c.noise for c in config.conditions}
-    return Backends(simulate or core_simulate(noise, config.world, config.task),
-                    Spy(reality) if reality_spy else reality, trace)
-
-
-def run(config, tmp_path, name='out', **kw) -> tuple[Store, Experiment]:
-    store = Store(tmp_path / name, config.hash)
-    store.open(config.to_yaml())
-    experiment = Experiment(config, kw.pop('backends', None) or backends(config), store, **kw)
-    experiment.run()
-    return store, experiment
+from khepera_noise_ros.testing.experiments import backends, run, tiny
 
 
 def scores(store, config) -> dict:

@@ -6,7 +6,7 @@ import re
 import pytest
 import yaml
 
-from conftest import next_domain_id
+from khepera_noise_ros.testing.domains import next_domain_id
 from khepera_noise_ros import cli
 from khepera_noise_ros.commands import replicate
 from khepera_noise_ros.experiment.protocol import STEPS

@@ -8,29 +8,7 @@ from scipy import stats as sps
 
 from khepera_noise_ros.experiment import report
 from khepera_noise_ros.experiment.protocol import STEPS
-from test_experiment_protocol import backends, run, tiny
-
-# Synthetic step scores per condition: 5% combination clearly better at step 5.
-MEANS = {'5% combination': (0.78, 0.77, 0.60, 0.74, 0.80),
-         '5% independent': (0.78, 0.77, 0.55, 0.72, 0.76),
-         '10% combination': (0.77, 0.76, 0.62, 0.73, 0.77),
-         '10% independent': (0.77, 0.76, 0.61, 0.73, 0.75)}
-GENERATIONS = {'5% combination': 30, '5% independent': 44, '10% combination': 40,
-               '10% independent': 41}
-
-
-def synthetic(trials=10) -> report.Results:
-    config = tiny(trials=trials)
-    rng = np.random.default_rng(5)
-    units = {}
-    for c in config.conditions:
-        for t in range(trials):
-            for s in STEPS:
-                value = MEANS[c.name][s - 1] + rng.normal(0, 0.01)
-                units[c.key, t, s] = {'best_fitness': value, 'mean': value, 'world': 'x',
-                                      'best_generation': GENERATIONS[c.name] + t % 3 - 1,
-                                      'history': [[0, 0.5, 0.4, 4]]}
-    return report.Results(config, units)
+from khepera_noise_ros.testing.experiments import backends, run, synthetic, tiny
 
 
 def test_table1_is_ranked_with_mean_sd_and_ci():
@@ -102,7 +80,8 @@ def test_a_run_writes_the_report_the_figures_and_the_raw_results(tmp_path):
     for needle in ('0.7952', '0.7567', '0.818', '35.0 vs 42.8', "Welch's t-test",
                    '![fig9](fig9.png)', 'emulator', config.hash):
         assert needle in text, needle
-    rows = list(csv.DictReader((out / 'results.csv').open()))
+    with (out / 'results.csv').open() as f:
+        rows = list(csv.DictReader(f))
     assert len(rows) == len(config.conditions) * config.trials * len(STEPS)
     assert tuple(rows[0]) == report.CSV_COLUMNS
     data = json.loads((out / 'results.json').read_text())

@@ -11,8 +11,7 @@ from khepera_noise_ros.experiment import power as pw
 from khepera_noise_ros.experiment import report, stats, stats_report, verdict
 from khepera_noise_ros.experiment.protocol import STEPS
 from khepera_noise_ros.experiment.store import Store
-from test_experiment_protocol import tiny
-from test_experiment_report import synthetic
+from khepera_noise_ros.testing.experiments import synthetic, tiny
 
 
 def test_judged_is_compare_and_judge_in_plain_form():

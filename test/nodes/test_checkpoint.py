@@ -12,18 +12,13 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from khepera_noise_ros.core import evolution
-from khepera_noise_ros.core.evaluation import CoreEvaluator
-from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.nodes.checkpoint import FORMAT
 from khepera_noise_ros.nodes.controller import Controller
 from khepera_noise_ros.nodes.local_graph import local_graph
 from khepera_noise_ros.nodes.runtime import events_executor, spinning
-from nodes_fixtures import controller, simulator, wait_for
-
-STEPS = 15
-CONFIG = evolution.EAConfig(population=5, generations=3)
-SEED, TRIALS = 7, 2
+from khepera_noise_ros.testing.evolutions import CONFIG, SEED, STEPS, TRIALS, \
+    assert_same_evolution, core_run
+from khepera_noise_ros.testing.probe import controller, simulator, wait_for
 
 
 class Crash(Exception):
@@ -44,25 +39,6 @@ class Counted:
 
     def __getattr__(self, name):
         return getattr(self.inner, name)
-
-
-def core_run(seed: int = SEED):
-    """The uninterrupted evolution in the core, and the number of generations complete in
-    every trial after each batch."""
-    eas = [evolution.SteadyStateEA(CONFIG, seed + i) for i in range(TRIALS)]
-    done: list[int] = []
-    evolution.evolve(eas, CoreEvaluator(task=Task(steps=STEPS)),
-                     progress=lambda eas: done.append(min(len(ea.history) for ea in eas)))
-    return eas, done
-
-
-def assert_same_evolution(record, eas):
-    assert record['best_genome'] == max(eas, key=lambda ea: ea.best_fitness).best_genome.tolist()
-    for trial, ea in zip(record['trials'], eas):
-        assert trial['best_genome'] == ea.best_genome.tolist()
-        assert trial['best_fitness'] == ea.best_fitness
-        assert trial['best_generation'] == ea.best_generation
-        assert trial['history'] == [vars(g) for g in ea.history]
 
 
 def test_a_run_interrupted_after_any_batch_resumes_to_the_uninterrupted_result(

@@ -11,7 +11,7 @@ from std_msgs.msg import Float64MultiArray
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.diagnostics import DropReport
 from khepera_noise_ros.nodes.runtime import spinning
-from nodes_fixtures import simulator, wait_for
+from khepera_noise_ros.testing.probe import simulator, wait_for
 
 UNIT = math.radians(3.0) * 20.0         # rad/s of power 1 at deg_per_power 3, rate_hz 20
 

@@ -26,7 +26,7 @@ from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.nodes.discovery import discover
 from khepera_noise_ros.nodes.episode import Chunk
 from khepera_noise_ros.nodes.workers import WorkerState
-from nodes_fixtures import controller, manager, simulator, wait_for
+from khepera_noise_ros.testing.probe import controller, manager, simulator, wait_for
 
 STEPS = 15
 CORE = CoreEvaluator(task=Task(steps=STEPS))
@@ -159,6 +159,9 @@ def worker_processes(context, namespaces) -> Iterator[tuple[dict[str, subprocess
     procs: dict[str, subprocess.Popen] = {}
 
     def start(ns: str) -> subprocess.Popen:
+        if ns in procs:                 # the process it replaces: ended and reaped
+            procs[ns].kill()
+            procs[ns].wait()
         procs[ns] = subprocess.Popen(
             [sys.executable, '-m', 'khepera_noise_ros.nodes.worker_pair', '--ros-args',
              '-r', f'__ns:={ns}', '-p', f'steps:={STEPS}', '--log-level', 'warn'], env=env)

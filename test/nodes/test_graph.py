@@ -19,7 +19,7 @@ from khepera_noise_ros.nodes.runtime import spinning
 from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.nodes.protocol import CMD_TURN
 from khepera_noise_ros.nodes.simulator import Simulator
-from nodes_fixtures import Probe, controller, manager, simulator, valid, wait_for
+from khepera_noise_ros.testing.probe import Probe, controller, manager, simulator, valid, wait_for
 
 STEPS = 20
 NOISE = dict(noise_model='combination', dependent_level=0.04, independent_level=0.03,

@@ -1,52 +1,15 @@
 """The conventional view of a robot node: sensor_msgs/Illuminance per light sensor,
 received by a node that subscribes like any other."""
-import threading
-
 import numpy as np
 import pytest
 from rclpy.node import Node
-from sensor_msgs.msg import Illuminance
-from std_msgs.msg import Float64MultiArray
 
 from khepera_noise_ros.core.illuminance import illuminance_variance
 from khepera_noise_ros.core.khepera import DARK
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.runtime import spinning
-from nodes_fixtures import Probe, simulator, wait_for
-
-
-class Listener(Node):
-    """Subscribes to light_sensor_0..7 and the lockstep light, as a user's node would."""
-
-    def __init__(self, context, namespace: str = ''):
-        super().__init__('listener', context=context, namespace=namespace)
-        self.lock = threading.Lock()
-        self.sensors: list[list[Illuminance]] = [[] for _ in range(8)]
-        self.light: list = []
-        for n in range(8):
-            self.create_subscription(Illuminance, f'light_sensor_{n}',
-                                     lambda msg, n=n: self._keep(self.sensors[n], msg), 10)
-        self.create_subscription(Float64MultiArray, protocol.LIGHT,
-                                 lambda msg: self._keep(self.light, msg), protocol.QOS)
-
-    def _keep(self, into: list, msg) -> None:
-        with self.lock:
-            into.append(msg)
-
-    def steps(self) -> dict:
-        """{stamp: 8 Illuminance messages} for the steps all eight sensors arrived for."""
-        with self.lock:
-            by_stamp: dict = {}
-            for n, messages in enumerate(self.sensors):
-                for msg in messages:
-                    key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-                    by_stamp.setdefault(key, [None] * 8)[n] = msg
-        return {k: v for k, v in by_stamp.items() if None not in v}
-
-    def robot0_light(self) -> list[np.ndarray]:
-        with self.lock:
-            return [protocol.unpack_light(m).values[0] for m in self.light]
+from khepera_noise_ros.testing.probe import Listener, Probe, simulator, wait_for
 
 
 def test_a_realtime_simulator_publishes_illuminance_with_frames_stamps_and_variance(

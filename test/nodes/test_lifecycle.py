@@ -12,7 +12,7 @@ from khepera_noise_ros.nodes.hardware_bridge import FAILURE, SUCCESS, HardwareBr
 from khepera_noise_ros.nodes.params import overrides
 from khepera_noise_ros.reality.emulator import Emulator
 from khepera_noise_ros.reality.world import EmulatedWorld
-from nodes_fixtures import TIMEOUT, Probe, wait_for
+from khepera_noise_ros.testing.probe import TIMEOUT, Listener, Probe, wait_for
 
 
 def bridge(context, ports, **values):
@@ -109,7 +109,6 @@ def test_autostart_configures_and_activates(ros_context):
 def test_the_active_bridge_publishes_illuminance_of_unknown_variance(ros_context):
     """The bridge's conventional view: robot 0's readings in their sensor frames, variance
     0 (unknown: there is no noise model of the real robot)."""
-    from test_nodes_illuminance import Listener
     with Emulator(EmulatedWorld(seed=2, robots=2)) as em:
         node = bridge(ros_context, em.ports, autostart=True)
         probe, listener = Probe(ros_context), Listener(ros_context, namespace='/')

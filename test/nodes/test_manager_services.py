@@ -9,8 +9,9 @@ from std_srvs.srv import Trigger
 
 from khepera_noise_ros.nodes.evolution_manager import BEST_FITNESS_QOS
 from khepera_noise_ros.nodes.local_graph import local_graph
-from nodes_fixtures import TIMEOUT, wait_for
-from test_nodes_checkpoint import CONFIG, SEED, STEPS, TRIALS, assert_same_evolution, core_run
+from khepera_noise_ros.testing.evolutions import CONFIG, SEED, STEPS, TRIALS, \
+    assert_same_evolution, core_run
+from khepera_noise_ros.testing.probe import TIMEOUT, wait_for
 
 
 class User(Node):

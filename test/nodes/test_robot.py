@@ -20,9 +20,9 @@ from khepera_noise_ros.nodes.protocol import BEARING, CMD_TURN, EPISODE_START, F
     LIGHT
 from khepera_noise_ros.nodes.simulator import Simulator
 from khepera_noise_ros.reality.khepera_robot import RobotUnreachable
-from nodes_fixtures import Probe, controller, simulator, valid, wait_for
+from khepera_noise_ros.testing.probe import Probe, controller, simulator, valid, wait_for
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 SEEDS = [11, 12, 13]
 
 

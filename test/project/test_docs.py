@@ -9,7 +9,7 @@ import pytest
 from khepera_noise_ros.core.frames import sensor_poses
 from khepera_noise_ros.tools import param_docs
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / 'README.md'
 INSTALL = "python3 -m venv .venv && .venv/bin/pip install -q -e '.[wheels,test]'"
 COMMANDS = [f'{INSTALL} && .venv/bin/khepera-noise replicate --quick',

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LAUNCH_FILES = sorted((ROOT / 'launch').glob('*.launch.py'))
 NO_LAUNCH = 'ROS 2 launch/launch_ros are not installed (no PyPI wheel): source a ROS 2 install'
 

@@ -4,7 +4,7 @@ from pathlib import Path
 import re
 import sys
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ROS = re.compile(r'^(rclpy|launch|launch_ros|ament_index_python|\w+_(msgs|srvs|interfaces))$')
 
 

@@ -10,7 +10,7 @@ from khepera_noise_ros.reality import effects
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
 from khepera_noise_ros.reality.world import EmulatedWorld, stationary
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 QUIET = EffectsConfig.none(sensor_noise=0.0)
 
 

@@ -165,9 +165,9 @@ def test_emulate_command_prints_its_devices_and_stops_on_sigterm():
         assert proc.wait(timeout=10) == 0
         assert b'stopped' in proc.stderr.read()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        with proc:                  # closes the pipes
+            if proc.poll() is None:
+                proc.kill()
 
 
 def test_emulate_measure_prints_section_2(capsys):

@@ -9,28 +9,10 @@ from khepera_noise_ros import recording
 from khepera_noise_ros.recording.bag import read_bag, write_bag
 from khepera_noise_ros.core import network
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.core.task import Episodes, Task, Trace, run
+from khepera_noise_ros.core.task import Task, run
 from khepera_noise_ros.recording import (FORMAT, Recording, RecordingError, concatenate,
                                          from_trace, load, read_csv, write_csv)
-
-
-def manifest(conditions=('bright',), **extra):
-    return {'format': FORMAT, 'source': 'simulator', 'sample_period_s': 1.0,
-            'conditions': {c: {'lamp_distance_mm': 5.0} for c in conditions}, **extra}
-
-
-def stationary(noise=NoiseModel(), headings=(0.0, 30.0), steps=20, seed=1,
-               condition='bright', first_episode=0) -> Recording:
-    """Readings of robots that never turn: what section 2 records, from the core."""
-    env = Episodes(noise=noise, task=Task(steps=steps, perturbation_deg=0))
-    readings, rows = env.reset(seed, len(headings), bearing_deg=headings), []
-    zeros = np.zeros(len(headings), np.int32)
-    while readings is not None:
-        rows.append((env.bearing_deg, readings.copy(), zeros + 1, zeros))
-        readings = env.step(zeros + 1, zeros)
-    trace = Trace(*(np.stack(c) for c in zip(*rows)))
-    return from_trace(trace, condition, manifest([condition], noise={'model': noise.model}),
-                      first_episode, stationary=True)
+from khepera_noise_ros.testing.recordings import manifest, stationary
 
 
 def closed_loop(seed=3) -> Recording:

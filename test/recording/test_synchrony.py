@@ -8,7 +8,7 @@ import pytest
 from khepera_noise_ros import cli, synchrony
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.recording import FORMAT, Recording, concatenate, write_csv
-from test_recording import stationary
+from khepera_noise_ros.testing.recordings import stationary
 
 
 def series(x: np.ndarray, condition='c', episode_length=None, channels_used=None) -> Recording:

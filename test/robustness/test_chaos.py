@@ -10,8 +10,8 @@ import subprocess
 import sys
 import time
 
-from conftest import next_domain_id
-from processes import alive, descendants, env, start_time
+from khepera_noise_ros.testing.domains import next_domain_id
+from khepera_noise_ros.testing.processes import alive, descendants, env, start_time
 from khepera_noise_ros import lifeline
 from khepera_noise_ros.core import evolution
 from khepera_noise_ros.core.evaluation import CoreEvaluator

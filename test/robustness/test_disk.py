@@ -20,7 +20,7 @@ import pytest
 from khepera_noise_ros import cli, files, recording
 from khepera_noise_ros.bag import read_bag, write_bag
 from khepera_noise_ros.nodes.checkpoint import Checkpoint
-from test_properties_files import sample_recording
+from khepera_noise_ros.testing.recordings import sample_recording
 
 
 def one_line(text: str) -> str:

@@ -35,8 +35,8 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 
-from conftest import next_domain_id, ros_domain
-import nodes_fixtures
+from khepera_noise_ros.testing.domains import next_domain_id, ros_domain
+from khepera_noise_ros.testing import probe
 from khepera_noise_ros.core import network
 from khepera_noise_ros.core.evaluation import CoreEvaluator
 from khepera_noise_ros.core.noise import NoiseModel
@@ -65,7 +65,7 @@ TIMEOUT = 20.0
 
 
 def wait_for(condition: Callable[[], bool], timeout: float = TIMEOUT) -> bool:
-    return nodes_fixtures.wait_for(condition, timeout)
+    return probe.wait_for(condition, timeout)
 
 
 def drop_counters(robot, ctrl, mgr) -> dict:

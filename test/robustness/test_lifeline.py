@@ -6,12 +6,16 @@ import signal
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 import yaml
 
-from conftest import next_domain_id
-from processes import ROOT, alive, command, descendants, kill, start, wait_until
+from khepera_noise_ros.testing.domains import next_domain_id
+from khepera_noise_ros.testing.processes import alive, command, descendants, kill, start, \
+    wait_until
+
+ROOT = Path(__file__).resolve().parents[2]
 
 TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 2000},
         'phase2': {'population': 3, 'generations': 200}, 'task': {'steps': 10},
@@ -107,7 +111,7 @@ def commands(tmp_path) -> dict[str, tuple[list[str], bool]]:
                                   'bench_graph'])
 def test_sigkill_of_a_command_leaves_none_of_its_processes(name, tmp_path):
     args, spawns = commands(tmp_path)[name]
-    proc = start(args, next_domain_id())
+    proc = start(args, next_domain_id(), cwd=ROOT)
     try:
         # running: its children started (and had a moment to start theirs), or some output
         if spawns:
@@ -123,7 +127,6 @@ def test_sigkill_of_a_command_leaves_none_of_its_processes(name, tmp_path):
         assert wait_until(lambda: not alive(recorded), 10), \
             f'{name} left behind after SIGKILL: {alive(recorded)}'
     finally:
-        kill(proc)
         for pid in alive(recorded if 'recorded' in locals() else {}):
-            os.kill(pid, signal.SIGKILL)            # what it left behind holds its pipes
-        proc.communicate(timeout=30)
+            os.kill(pid, signal.SIGKILL)            # what it left behind
+        kill(proc)

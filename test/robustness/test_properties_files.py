@@ -12,17 +12,16 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import yaml
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from khepera_noise_ros import recording
 from khepera_noise_ros.bag import read_bag, write_bag
-from khepera_noise_ros.core.task import Episodes, Task, Trace
 from khepera_noise_ros.experiment import config as replicate_config
 from khepera_noise_ros.gap import effects as fx, simconfig
 from khepera_noise_ros.nodes.checkpoint import FORMAT as CHECKPOINT, Checkpoint
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
+from khepera_noise_ros.testing.recordings import sample_recording
 
 # examples per test: a few dozen in the suite (files make them slow); set
 # KHEPERA_NOISE_EXAMPLES=200 for the thorough run docs/robustness.md reports
@@ -39,19 +38,6 @@ def loads_or_refuses(load, *args):
         assert isinstance(exc, REFUSALS), f'{type(exc).__name__}: {exc}'
         assert str(exc) and '\n' not in str(exc), repr(str(exc))
         return None
-
-
-def sample_recording() -> recording.Recording:
-    env = Episodes(task=Task(steps=6, perturbation_deg=0))
-    readings, rows = env.reset(5, 2, bearing_deg=[0.0, 30.0]), []
-    zeros = np.zeros(2, np.int32)
-    while readings is not None:
-        rows.append((env.bearing_deg, readings.copy(), zeros + 1, zeros))
-        readings = env.step(zeros + 1, zeros)
-    manifest = {'format': recording.FORMAT, 'source': 'simulator', 'sample_period_s': 1.0,
-                'conditions': {'bright': {'lamp_distance_mm': 5.0}}}
-    return recording.from_trace(Trace(*(np.stack(c) for c in zip(*rows))), 'bright', manifest,
-                                stationary=True)
 
 
 WORK = Path(tempfile.mkdtemp(prefix='khepera-properties-'))

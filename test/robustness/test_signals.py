@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import next_domain_id
-from processes import command, kill, opened, start, stop, wait_until
+from khepera_noise_ros.testing.domains import next_domain_id
+from khepera_noise_ros.testing.processes import command, kill, opened, start, stop, wait_until
 
 TINY = {'trials': 2, 'test_episodes': 2, 'phase1': {'population': 4, 'generations': 40},
         'phase2': {'population': 3, 'generations': 10}, 'task': {'steps': 10},
