@@ -14,10 +14,17 @@ MAX_LINES = 500
 # Lower layers never import higher ones; a module may import its own layer or below.
 LAYERS = (
     ('files', 'lifeline', 'core'),                          # plain utilities and the paper's model
-    ('recording', 'bag', 'convert', 'reality', 'gap', 'synchrony'),   # data, worlds, analyses
-    ('nodes', 'experiment'),                         # ROS adapters, the replication protocol
+    ('effects', 'simconfig', 'recording', 'bag', 'convert', 'reality'),   # effects, data, worlds
+    ('gap', 'synchrony'),                                   # analyses of recordings
+    ('nodes', 'experiment'),                         # ROS adapters, the experiments
     ('commands',),                                   # one module per subcommand
     ('cli', 'tools', 'testing'),                     # entry points; the tests' helpers
+)
+# Beyond the layers: who may not use whom at all (a package, the packages it must not import).
+APART = (
+    ('nodes', ('gap',)),              # the simulator runs fitted effects without the diagnosis
+    ('effects', ('gap', 'recording', 'reality')),    # the effects know nothing of what fits them
+    ('reality', ('effects', 'gap', 'simconfig')),    # the emulator shares no code with the fit
 )
 
 
@@ -114,6 +121,15 @@ def upward(graph: dict[str, set[str]]) -> list[str]:
             if layer_of(b) > layer_of(a)]
 
 
+def crossings(graph: dict[str, set[str]]) -> list[str]:
+    """'a -> b' for every import ``APART`` forbids."""
+    def top(module: str) -> str:
+        return module.split('.')[1] if '.' in module else ''
+    banned = dict(APART)
+    return [f'{a} -> {b}' for a, targets in sorted(graph.items()) for b in sorted(targets)
+            if top(b) in banned.get(top(a), ())]
+
+
 def long_modules(root: Path = ROOT, limit: int = MAX_LINES) -> list[str]:
     return [f'{p.relative_to(root.parent)}: {n} lines' for p in sorted(root.rglob('*.py'))
             if (n := len(p.read_text().splitlines())) > limit]
@@ -127,6 +143,10 @@ def test_the_package_imports_form_no_circle():
 
 def test_no_module_imports_a_higher_layer():
     assert upward(import_graph()) == []
+
+
+def test_no_package_imports_one_it_must_stay_apart_from():
+    assert crossings(import_graph()) == []
 
 
 def test_no_module_is_longer_than_500_lines():
