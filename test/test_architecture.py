@@ -17,7 +17,7 @@ LAYERS = (
     ('recording', 'bag', 'convert', 'reality', 'gap', 'synchrony'),   # data, worlds, analyses
     ('nodes', 'experiment'),                         # ROS adapters, the replication protocol
     ('commands',),                                   # one module per subcommand
-    ('cli', 'tools'),                                # entry points; the cli finds the commands
+    ('cli', 'tools', 'testing'),                     # entry points; the tests' helpers
 )
 
 
