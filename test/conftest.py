@@ -6,6 +6,9 @@ import os
 # Must be set before rclpy loads: Fast DDS otherwise multicasts off this machine.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 200))
+# One BLAS thread (set before numpy loads): the analyses' matrices are small, and on a
+# shared machine OpenBLAS's threads make the closed loop's regressions several times slower.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import pytest  # noqa: E402
 
