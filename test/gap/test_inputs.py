@@ -4,12 +4,15 @@ import dataclasses
 import numpy as np
 import pytest
 
+from khepera_noise_ros import effects as fx
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.gap import diagnose, noisefit, replay, simconfig, split
-from khepera_noise_ros.gap import effects as fx
-from khepera_noise_ros.gap.simulate import stationary
+from khepera_noise_ros.effects import CorrelatedNoise
+from khepera_noise_ros.effects.simulate import stationary
+from khepera_noise_ros.gap import diagnose, noisefit, simconfig, split
+from khepera_noise_ros.gap.protocol import ProtocolError
 from khepera_noise_ros.recording import FORMAT, Recording, RecordingError
-from test_gap_support import CONFIG, closed_loop_protocol, recorded, stationary_protocol
+from khepera_noise_ros.testing.protocols import (CONFIG, closed_loop_protocol, recorded,
+                                                 stationary_protocol)
 
 OPTIONS = diagnose.Options(config=CONFIG, replicates=30)
 
@@ -45,7 +48,7 @@ def test_a_wrong_manifest_is_refused_with_the_key():
 def test_a_closed_loop_recording_needs_its_genome():
     rec = recorded(closed_loop_protocol(4))
     rec.manifest = {k: v for k, v in rec.manifest.items() if k != 'genome'}
-    with pytest.raises(replay.ProtocolError, match='genome'):
+    with pytest.raises(ProtocolError, match='genome'):
         diagnose.diagnose([rec], OPTIONS)
 
 
@@ -72,7 +75,8 @@ def test_bad_simulator_parameters_and_effects_are_refused(tmp_path):
         simconfig.load(tmp_path / 'missing.yaml')
     path.write_text('simulator:\n  ros__parameters:\n    mode: realtime\n    robots: 3\n')
     assert simconfig.load(path) == simconfig.SimConfig()    # other node parameters pass
-    with pytest.raises(ValueError, match='steps must be >= 0'):
+    # the old message said 'steps must be >= 0'; the effects layer now names the kind too
+    with pytest.raises(ValueError, match='steps must be an integer >= 0'):
         fx.from_dict({'name': 'sensor_latency', 'sensors': [0], 'steps': -1})
 
 
@@ -83,7 +87,7 @@ def board(channels: int = 12, used=tuple(range(10)), seed: int = 3) -> Recording
     conditions = {'lights_on': {'note': 'overhead fluorescent'}, 'lights_off': {}}
     runs = [(c, e) for e in range(4) for c in conditions]
     base = np.stack([levels * (0.6 if c == 'lights_on' else 1.0) for c, _ in runs], axis=1)
-    effects = (fx.CorrelatedNoise(((7, 8, 9),), 0.03),)
+    effects = (CorrelatedNoise(((7, 8, 9),), 0.03),)
     x = stationary(np.repeat(base[None] / 2, 80, axis=0), NoiseModel.independent_only(0.02),
                    effects, seed) * 2                    # the model runs on a 0..525 scale
     x[:, [c for c in range(channels) if c not in used]] = np.nan

@@ -1,11 +1,12 @@
-"""`khepera-noise fit`: the paper's model recovered from recordings of known noise."""
+"""`khepera-noise fit` (``gap.noisefit``): the paper's model recovered from recordings of
+known noise."""
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.effects import IntensityDependentNoise
 from khepera_noise_ros.gap import noisefit
 from khepera_noise_ros.gap.simconfig import SimConfig
-from test_gap_support import recorded, stationary_protocol
+from khepera_noise_ros.testing.protocols import recorded, stationary_protocol
 
 
 def test_groups_levels_and_distribution_of_the_paper_model_are_recovered():
@@ -31,7 +32,7 @@ def test_independent_noise_gives_no_groups():
 
 
 def test_noise_that_grows_with_the_level_is_found_where_the_data_show_it():
-    flicker = fx.IntensityDependentNoise(tuple(range(8)), 0.05, 2.0)
+    flicker = IntensityDependentNoise(tuple(range(8)), 0.05, 2.0)
     rec = recorded(stationary_protocol(samples=20), (flicker,))
     fitted = noisefit.fit(rec)
     assert [e.name for e in fitted.effects] == ['intensity_dependent_noise']

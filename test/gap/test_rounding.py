@@ -13,14 +13,14 @@ import pytest
 from khepera_noise_ros.core.khepera import SENSOR_ANGLES_DEG, SENSORS, World
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task
-from khepera_noise_ros.gap import diagnose, report, rounding, simconfig
-from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.effects import CorrelatedNoise, SensorGainOffset, SensorLatency
+from khepera_noise_ros.effects.simulate import EffectEpisodes, stationary
+from khepera_noise_ros.gap import diagnose, report, simconfig
 from khepera_noise_ros.gap.simconfig import SimConfig
-from khepera_noise_ros.gap.simulate import EffectEpisodes, stationary
 from khepera_noise_ros.gap.target import Target
-from test_gap_support import CONFIG, recorded, stationary_protocol
+from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
 
-READING = rounding.with_rounding(CONFIG, 'reading')
+READING = diagnose.with_rounding(CONFIG, 'reading')
 
 
 def test_the_rounding_is_a_setting_of_the_noise_model_with_the_papers_as_default():
@@ -47,10 +47,9 @@ def test_either_rounding_clips_once_at_the_end():
     """A level beyond the dark end stays beyond it until the end, at either setting (a
     converter saturates the noisy reading): with a light-stage offset of +10 on a
     reading of 520 (530) and noise of +-3% (at most 15.9), readings reach down to 514
-    and no lower, and about two thirds read 525.  (The paper's setting used to clip 530
-    to 525 first; its noise then reached down to about 509.)"""
+    and no lower, and about two thirds read 525."""
     base = np.full((3000, 8, 1), 520.0)
-    offset = fx.SensorGainOffset(tuple(range(8)), (1.0,) * 8, (10.0,) * 8)
+    offset = SensorGainOffset(tuple(range(8)), (1.0,) * 8, (10.0,) * 8)
     level = stationary(base, NoiseModel.independent_only(0.03), (offset,), seed=2)
     reading = stationary(base, NoiseModel.independent_only(0.03, rounding='reading'),
                          (offset,), seed=2)
@@ -76,14 +75,14 @@ def test_closed_loop_episodes_add_the_noise_to_the_unrounded_light():
     # the node's episodes with an effect give the same readings as without one that acts
     plain = EffectEpisodes(world, NoiseModel.independent_only(0.02, rounding='reading'), task)
     latent = EffectEpisodes(world, NoiseModel.independent_only(0.02, rounding='reading'), task,
-                            (fx.SensorLatency((0,), 1),))
+                            (SensorLatency((0,), 1),))
     first = plain.reset(3, robots=50)
     assert first.shape == (50, SENSORS) and np.array_equal(first, np.rint(first))
     assert np.array_equal(latent.reset(3, robots=50)[:, 1:], first[:, 1:])
 
 
 def test_the_rounding_goes_through_the_params_file_and_bad_values_are_refused(tmp_path):
-    config = dataclasses.replace(READING, effects=(fx.SensorLatency((1,), 1),))
+    config = dataclasses.replace(READING, effects=(SensorLatency((1,), 1),))
     assert config.parameters()['rounding'] == 'reading'
     path = simconfig.write(config, tmp_path / 'fitted_params.yaml')
     assert simconfig.load(path) == config
@@ -92,19 +91,19 @@ def test_the_rounding_goes_through_the_params_file_and_bad_values_are_refused(tm
         simconfig.from_parameters({'rounding': 'late'}, 'p.yaml')
 
 
-def test_the_simulator_node_loads_the_rounding_and_refuses_a_bad_one(tmp_path):
+def test_the_simulator_node_loads_the_rounding_and_refuses_a_bad_one(tmp_path, ros_context):
     import rclpy
 
-    from conftest import ros_domain
     from khepera_noise_ros.nodes.params import noise_from
     from khepera_noise_ros.nodes.simulator import Simulator
     path = simconfig.write(READING, tmp_path / 'fitted_params.yaml')
-    with ros_domain(['--ros-args', '--params-file', str(path)]) as context:
-        node = Simulator(context=context)
+    node = Simulator(context=ros_context, cli_args=['--ros-args', '--params-file', str(path)])
+    try:
         value = node.get_parameter('rounding').value
         rounding_used = node.backend.noise.rounding
         refused = node.set_parameters([rclpy.parameter.Parameter('rounding', value='late')])
         kept = node.get_parameter('rounding').value
+    finally:
         node.destroy_node()
     assert value == 'reading' and rounding_used == 'reading'
     assert not refused[0].successful and 'late' in refused[0].reason and kept == 'reading'
@@ -117,12 +116,12 @@ def test_the_simulator_node_loads_the_rounding_and_refuses_a_bad_one(tmp_path):
 
 # --- the diagnosis chooses it ------------------------------------------------------------
 
-HIDDEN = ([], [fx.CorrelatedNoise(((0, 5), (1, 3)), 0.02)],
-          [fx.SensorGainOffset((2, 5), (1.1, 0.9), (8.0, -6.0))])
+HIDDEN = ([], [CorrelatedNoise(((0, 5), (1, 3)), 0.02)],
+          [SensorGainOffset((2, 5), (1.1, 0.9), (8.0, -6.0))])
 
 
 @pytest.mark.parametrize('hidden', HIDDEN, ids=['none', 'pairs', 'calibration'])
-def test_the_lattice_prefers_the_rounding_the_recording_was_made_with(hidden):
+def test_the_lattice_prefers_the_rounding_the_recording_was_made_with(hidden, lattice_choice):
     """Recordings made by a simulator that rounds the reading are told from the
     paper's simulator by their value lattice, given the hidden effect; recordings made
     by the paper's simulator (controls) keep it, whichever side is asked."""
@@ -130,13 +129,13 @@ def test_the_lattice_prefers_the_rounding_the_recording_was_made_with(hidden):
     for seed in (5, 6):
         made_reading = recorded(protocol, hidden, config=READING, seed=seed)
         made_level = recorded(protocol, hidden, seed=seed)
-        assert rounding.choose(Target([made_reading], CONFIG, 1), hidden)['rounding'] \
+        assert lattice_choice(Target([made_reading], CONFIG, 1), hidden)['rounding'] \
             == 'reading'
-        control = rounding.choose(Target([made_level], CONFIG, 1), hidden)
+        control = lattice_choice(Target([made_level], CONFIG, 1), hidden)
         assert control['rounding'] == 'level', control
-        assert rounding.choose(Target([made_level], READING, 1), hidden)['rounding'] \
+        assert lattice_choice(Target([made_level], READING, 1), hidden)['rounding'] \
             == 'level'
-        assert rounding.choose(Target([made_reading], READING, 1), hidden)['rounding'] \
+        assert lattice_choice(Target([made_reading], READING, 1), hidden)['rounding'] \
             == 'reading'
 
 
@@ -147,10 +146,10 @@ def test_the_diagnosis_rounds_the_reading_when_the_robot_does_and_writes_it(tmp_
     the pairs and nothing else, and fitted_params.yaml loads both.  The same robot
     rounding as the paper's simulator does (a control) keeps the paper's rounding."""
     low = SimConfig(noise=NoiseModel.independent_only(0.01))
-    hidden = [fx.CorrelatedNoise(((0, 5), (1, 3)), 0.01)]
+    hidden = [CorrelatedNoise(((0, 5), (1, 3)), 0.01)]
     options = diagnose.Options(config=low, replicates=60)
     rec = recorded(stationary_protocol(samples=60), hidden,
-                   config=rounding.with_rounding(low, 'reading'), seed=5)
+                   config=diagnose.with_rounding(low, 'reading'), seed=5)
     result = diagnose.diagnose([rec], options)
     assert result.rounding['rounding'] == 'reading', result.rounding
     assert result.to_json()['rounding']['given'] == 'level'

@@ -1,6 +1,6 @@
 """Each effect of the vocabulary, hidden in small generated data, is named and located.
 
-The 'robot' is the simulator with one effect added (``test_gap_support.recorded``);
+The 'robot' is the simulator with one effect added (``testing.protocols.recorded``);
 the diagnosis gets the recording and the plain simulator's configuration only.
 """
 import dataclasses
@@ -8,23 +8,26 @@ import dataclasses
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
+from khepera_noise_ros.effects import (ActuatorTurnError, CorrelatedNoise,
+                                       IntensityDependentNoise, SaturationQuantization,
+                                       SensorGainOffset, SensorLatency, TemporalDrift)
 from khepera_noise_ros.gap import diagnose
-from khepera_noise_ros.gap import effects as fx
-from test_gap_support import CONFIG, closed_loop_protocol, recorded, stationary_protocol
+from khepera_noise_ros.testing.protocols import (CONFIG, closed_loop_protocol, recorded,
+                                                 stationary_protocol)
 
 CASES = [
-    (fx.CorrelatedNoise(((1, 2, 3),), 0.02), [[1, 2, 3]], {'strength': (0.02, 0.006)}),
-    (fx.IntensityDependentNoise((0, 1, 2, 3, 4, 5), 0.04, 2.0), [0, 1, 2, 3, 4, 5],
+    (CorrelatedNoise(((1, 2, 3),), 0.02), [[1, 2, 3]], {'strength': (0.02, 0.006)}),
+    (IntensityDependentNoise((0, 1, 2, 3, 4, 5), 0.04, 2.0), [0, 1, 2, 3, 4, 5],
      {'exponent': (2.0, 1.0)}),
-    (fx.SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0)), [2, 5],
+    (SensorGainOffset((2, 5), (1.12, 0.9), (4.0, -6.0)), [2, 5],
      {'gains': ([1.12, 0.9], 0.02)}),
-    (fx.TemporalDrift(tuple(range(8)), 0.012, 30.0, True), list(range(8)),
+    (TemporalDrift(tuple(range(8)), 0.012, 30.0, True), list(range(8)),
      {'sd': (0.012, 0.005)}),
-    (fx.SensorLatency((0, 1, 2, 3), 1), [0, 1, 2, 3], {'steps': (1, 0)}),
-    (fx.SaturationQuantization((0, 5), 0.0, 450.0, 4.0), [0, 5],
+    (SensorLatency((0, 1, 2, 3), 1), [0, 1, 2, 3], {'steps': (1, 0)}),
+    (SaturationQuantization((0, 5), 0.0, 450.0, 4.0), [0, 5],
      {'high': (450.0, 4.0), 'step': (4.0, 0.0)}),
-    (fx.ActuatorTurnError(0.7, 0.1), [], {'scale': (0.7, 0.1)}),
-    (fx.SaturationQuantization((0, 1, 2, 3, 4, 5, 6, 7), 0.0, 500.0), list(range(8)),
+    (ActuatorTurnError(0.7, 0.1), [], {'scale': (0.7, 0.1)}),
+    (SaturationQuantization((0, 1, 2, 3, 4, 5, 6, 7), 0.0, 500.0), list(range(8)),
      {'high': (500.0, 4.0)}),
 ]
 OPTIONS = diagnose.Options(config=CONFIG, replicates=40)
@@ -77,7 +80,7 @@ def test_a_gap_no_effect_explains_is_answered_none_with_the_reason():
 def test_an_effect_fitted_in_bright_light_shrinks_the_gap_in_dim_light():
     """Flicker that grows steeply with darkness, fitted with the dim condition withheld:
     the level dependence must carry over to the condition the fit never saw."""
-    flicker = fx.IntensityDependentNoise(tuple(range(8)), 0.04, 2.0)
+    flicker = IntensityDependentNoise(tuple(range(8)), 0.04, 2.0)
     real = recordings([flicker])
     options = dataclasses.replace(OPTIONS, held_out=('bulb_2ft',))
     result = diagnose.diagnose(real, options)
@@ -91,8 +94,7 @@ def test_an_effect_fitted_in_bright_light_shrinks_the_gap_in_dim_light():
 def test_isolated_dropouts_to_zero_are_found_located_and_measured():
     """Two sensors lose 2% of their readings (they read 0): rare events, so a longer
     recording; the spread they add is named as dropouts, not as noise."""
-    lost = fx.SaturationQuantization((1, 6), dropout=0.02, dropout_value=0.0)
-    from test_gap_support import stationary_protocol
+    lost = SaturationQuantization((1, 6), dropout=0.02, dropout_value=0.0)
     result = diagnose.diagnose([recorded(stationary_protocol(samples=60), [lost], seed=5)],
                                OPTIONS)
     assert result.top_effect == 'saturation_quantization', result.effects[:2]
@@ -101,3 +103,29 @@ def test_isolated_dropouts_to_zero_are_found_located_and_measured():
     assert top['parameters']['dropout'] == pytest.approx(0.02, abs=0.01)
     assert top['parameters']['dropout_value'] == 0.0
     assert top['heldout_reduction'] > 0.3
+
+
+def test_a_spread_law_growing_with_brightness_is_fitted_with_its_parameters():
+    """The flicker of the vocabulary grows with darkness; this noise grows with
+    brightness, per sensor, with a constant part: the law's direction, power and
+    constant come out, and it removes most of the held-out gap."""
+    law = IntensityDependentNoise(tuple(range(8)), 0.03, 1.0, 525.0, 1.5, 'bright', False)
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=40), [law], seed=5)],
+                               dataclasses.replace(OPTIONS, replicates=60))
+    assert result.top_effect == 'intensity_dependent_noise', result.effects[:2]
+    p = result.effects[0]['parameters']
+    assert p['direction'] == 'bright' and not p['shared']
+    assert abs(p['exponent'] - 1.0) <= 0.5 and p['constant'] < 4.0
+    assert result.effects[0]['heldout_reduction'] > 0.8
+
+
+def test_shared_noise_of_a_fixed_size_is_correlated_noise_in_every_group():
+    """Two non-adjacent pairs share noise of 6 readings whatever the light (a supply):
+    both groups are found and the fixed size is fitted."""
+    hidden = [CorrelatedNoise(((3, 5), (0, 6)), 0.0, 6.0)]
+    result = diagnose.diagnose([recorded(stationary_protocol(samples=30), hidden, seed=5)],
+                               dataclasses.replace(OPTIONS, replicates=60))
+    assert result.top_effect == 'correlated_noise', result.effects[:2]
+    p = result.effects[0]['parameters']
+    assert sorted(map(sorted, p['groups'])) == [[0, 6], [3, 5]]
+    assert abs(p['constant'] - 6.0) < 1.5 and p['strength'] < 0.005

@@ -1,16 +1,19 @@
-"""A compound step judged on the part of the statistics it acts on (``gap/partstep.py``).
+"""The forward selection's rules (``gap.select``) on made-up comparisons.
 
-Made-up held-out comparisons, shaped as the benchmark's rejected dropouts were: a large
-stationary part the step does not touch, whose paired replicates move with the
-simulator's own noise, beside a small dropout part the step removes entirely.
+A step judged on the part of the statistics it acts on (``part_step``): held-out
+comparisons shaped as the benchmark's rejected dropouts were, a large stationary part
+the step does not touch, whose paired replicates move with the simulator's own noise,
+beside a small dropout part the step removes entirely.  And the backfit, which weighs
+only a refit that differs from the effect it had.
 """
-import dataclasses
-
 import numpy as np
 
-from khepera_noise_ros.gap import compound, partstep
-from khepera_noise_ros.gap.blocks import Key
-from khepera_noise_ros.gap.where import Comparison
+from khepera_noise_ros.effects import SensorGainOffset, SensorLatency
+from khepera_noise_ros.effects.base import Candidate, Key
+from khepera_noise_ros.gap import select
+from khepera_noise_ros.gap.compare import Comparison
+from khepera_noise_ros.gap.target import Target
+from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
 
 STATIONARY = [Key('level', (i % 8,), f'c{i}', None) for i in range(40)]
 DROPOUT = [Key('dropout', (s,), 'low', None) for s in (1, 4)]
@@ -20,15 +23,17 @@ N = len(STATIONARY)
 SE = np.r_[np.ones(N), np.full(len(DROPOUT), 0.001), np.full(len(VALUES), 0.01)]
 
 
-class Effect:
+class Named:
+    """An effect as the selection's rules see it: its name."""
+
     def __init__(self, name):
         self.name = name
 
 
 class FakeTarget:
     """What the selection asks of a ``Target``: the real data's bootstrap replicates
-    against a comparison's simulated side, and comparisons with the chosen effects (the
-    simulated side moves with the simulator's seed)."""
+    against a comparison's simulated side, comparisons with the chosen effects (the
+    simulated side moves with the simulator's seed), and a copy on another seed."""
 
     def __init__(self, real, reps, sims, seed=0):
         self.real, self.reps, self.sims, self.seed = real, reps, sims, seed
@@ -41,6 +46,9 @@ class FakeTarget:
         index = [KEYS.index(k) for k in c.keys]
         z = (self.reps[:, index] - c.sim[None]) / c.se[None]
         return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+
+    def with_seed(self, seed):
+        return FakeTarget(self.real, self.reps, self.sims, seed)
 
 
 def _target(dropout_after=0.0, worse=0.0, confirm=True, seed=3):
@@ -55,7 +63,7 @@ def _target(dropout_after=0.0, worse=0.0, confirm=True, seed=3):
     z_none = np.r_[np.full(N, 4.0), np.full(2, 5.3), np.zeros(2)]
     flip = np.r_[np.where(np.arange(N) < N // 2, -4.0, 4.0), np.zeros(4)]
     sims = {}
-    for s in (0, compound.CONFIRM_SEED):
+    for s in (0, select.CONFIRM_SEED):
         z_after = np.r_[flip[:N], np.full(2, dropout_after), np.full(2, worse)]
         if s and not confirm:               # on the second seed the step leaves them
             z_after[N:N + 2] = 5.3
@@ -65,13 +73,13 @@ def _target(dropout_after=0.0, worse=0.0, confirm=True, seed=3):
 
 
 def _judge(b):
-    first = current = b.compare([Effect('sensor_latency')])
-    after = b.compare([Effect('sensor_latency'), Effect('saturation_quantization')])
-    chosen = [Effect('sensor_latency')]
-    effects = chosen + [Effect('saturation_quantization')]
+    chosen = [Named('sensor_latency')]
+    effects = chosen + [Named('saturation_quantization')]
+    first = current = b.compare(chosen)
+    after = b.compare(effects)
     reps = b.replicate_discrepancies(current)
-    return compound._judge(b, first, current, reps, chosen, effects, after,
-                           first.discrepancy, current.discrepancy)
+    selection = select.Selection(None, b, first, first.discrepancy)
+    return selection.judge(current, reps, chosen, effects, after, current.discrepancy)
 
 
 def test_a_step_that_removes_a_small_part_counts_by_that_part():
@@ -79,8 +87,8 @@ def test_a_step_that_removes_a_small_part_counts_by_that_part():
     noise: the overall paired p fails, the dropout part's own passes."""
     b = _target()
     rule, _, p, added = _judge(b)
-    assert p >= compound.STEP_ALPHA          # the old rules never got past this
-    assert added >= compound.MIN_ADDED
+    assert p >= select.STEP_ALPHA          # the whole-comparison rules never get past this
+    assert added >= select.MIN_ADDED
     assert rule == 'part: dropout'
 
 
@@ -101,13 +109,39 @@ def test_a_part_step_must_remove_a_share_of_the_part_and_be_confirmed():
     assert _judge(_target(confirm=False))[0] == ''
 
 
-def test_the_parts_p_is_corrected_for_the_parts_tried():
+def test_the_parts_p_is_corrected_for_the_parts_tried(monkeypatch):
     b = _target()
-    split = compound._split
     first = current = b.compare([1])
     after = b.compare([1, 2])
-    assert partstep.passing(b, split, compound._chance, first, current, after,
-                            compound.PART) == 'dropout'
-    strict = dataclasses.replace(compound.PART, alpha=1e-3)
+    assert select.part_step(b, first, current, after) == 'dropout'
+    monkeypatch.setattr(select, 'STEP_ALPHA', 1e-3)
     # 200 replicates: p is at least 1/201, above 1e-3 / 2 parts
-    assert partstep.passing(b, split, compound._chance, first, current, after, strict) == ''
+    assert select.part_step(b, first, current, after) == ''
+
+
+def test_backfit_does_not_weigh_a_refit_that_is_the_effect_it_had(monkeypatch):
+    rec = recorded(stationary_protocol(samples=10))
+    a = Target([rec], CONFIG, seed=1)
+    chosen = [SensorGainOffset((0,), (1.1,), (2.0,)), SensorLatency((1,), 1)]
+    calls = []
+    monkeypatch.setattr(select, 'fit_one', lambda name, given, c: Candidate(
+        name, next(e for e in chosen if e.name == name), 'same'))
+    monkeypatch.setattr(Target, 'objective',
+                        lambda self, effects=(), **kw: calls.append(effects) or 0.0)
+    selection = select.Selection(a, None, None, 1.0)
+    assert selection.backfit(chosen) == chosen
+    assert calls == []
+    # a refit that differs is weighed: both objectives are asked for
+    changed = SensorGainOffset((0,), (1.2,), (2.0,))
+    monkeypatch.setattr(select, 'fit_one', lambda name, given, c: Candidate(name, changed, ''))
+    selection.backfit(chosen)
+    assert len(calls) == 2
+
+
+def test_the_simpler_effect_is_as_good_within_the_tie_or_unbeaten():
+    rng = np.random.default_rng(0)
+    best = rng.normal(100.0, 5.0, 200)
+    assert select.as_good(100.0, best, 100.0 * (1 + select.TIE), best + 50.0, 0.05)
+    assert not select.as_good(100.0, best, 150.0, best + 50.0, 0.05)
+    assert select.as_good(100.0, best, 150.0, best + rng.normal(0.0, 50.0, 200), 0.05)
+    assert select.free('correlated_noise') < select.free('intensity_dependent_noise')

@@ -4,17 +4,18 @@ import json
 import yaml
 
 from khepera_noise_ros import cli
-from khepera_noise_ros.gap import effects as fx
+from khepera_noise_ros.core.noise import NoiseModel
+from khepera_noise_ros.effects import SensorLatency
 from khepera_noise_ros.gap import simconfig
 from khepera_noise_ros.recording import write_csv
-from test_gap_support import recorded, stationary_protocol
+from khepera_noise_ros.testing.protocols import recorded, stationary_protocol
 
 PARAMS = 'simulator:\n  ros__parameters:\n    noise_model: independent\n' \
          '    independent_level: 0.02\n    mode: lockstep\n'
 
 
 def test_diagnose_writes_the_json_report_figures_and_loadable_params(tmp_path, capsys):
-    latency = fx.SensorLatency((2, 3), 1)
+    latency = SensorLatency((2, 3), 1)
     write_csv(recorded(stationary_protocol(samples=20), (latency,)), tmp_path / 'still')
     (tmp_path / 'sim.yaml').write_text(PARAMS)
     out = tmp_path / 'out'
@@ -32,12 +33,11 @@ def test_diagnose_writes_the_json_report_figures_and_loadable_params(tmp_path, c
         assert (out / figure).stat().st_size > 1000
     assert '![shrink](shrink.png)' in (out / 'report.md').read_text()
     fitted = simconfig.load(out / 'fitted_params.yaml')
-    assert fitted.effects == (fx.SensorLatency((2, 3), 1),)
+    assert fitted.effects == (SensorLatency((2, 3), 1),)
     assert fitted.noise.model == 'independent'
 
 
 def test_fit_writes_params_the_simulator_reads(tmp_path, capsys):
-    from khepera_noise_ros.core.noise import NoiseModel
     truth = NoiseModel('combination', 0.05, 0.02, ((0, 1, 2, 3), (4, 5, 6, 7)))
     write_csv(recorded(stationary_protocol(samples=20),
                        config=simconfig.SimConfig(noise=truth)), tmp_path / 'still')
