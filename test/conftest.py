@@ -16,9 +16,7 @@ domains.claim()
 
 import pytest  # noqa: E402
 
-# The gap tests import these two from here (``from conftest import ros_domain``) until they
-# move into test/gap/; every other test imports them from khepera_noise_ros.testing.domains.
-from khepera_noise_ros.testing.domains import next_domain_id, ros_domain  # noqa: E402,F401
+from khepera_noise_ros.testing.domains import ros_domain  # noqa: E402
 
 
 @pytest.fixture
@@ -26,11 +24,3 @@ def ros_context():
     """An rclpy Context on a fresh domain of this worker's, shut down after the test."""
     with ros_domain() as context:
         yield context
-
-
-def pytest_collection_modifyitems(items):
-    """A warning is an error (setup.cfg), except a RuntimeWarning in the gap tests: numpy
-    still warns in gap/ (issue 25 mends it); until then it is shown there, not raised."""
-    for item in items:
-        if item.path.name.startswith('test_gap_') or item.path.name == 'test_blind_outside.py':
-            item.add_marker(pytest.mark.filterwarnings('default::RuntimeWarning'))

@@ -7,7 +7,8 @@ from khepera_noise_ros.core.evolution import SteadyStateEA
 from khepera_noise_ros.experiment.protocol import STEPS, Backends, ConditionEpisodes, \
     Experiment, core_simulate, episodes_per_run, per_condition, seed_for
 from khepera_noise_ros.experiment.store import Store
-from khepera_noise_ros.testing.experiments import backends, run, tiny
+from khepera_noise_ros.experiment import config as settings
+from khepera_noise_ros.testing.experiments import TINY, backends, run, tiny
 
 
 def scores(store, config) -> dict:

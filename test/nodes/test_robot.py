@@ -10,8 +10,9 @@ from std_msgs.msg import Float64MultiArray, Int32MultiArray, MultiArrayDimension
 
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.task import Episodes, Task, step_fitness
-from khepera_noise_ros.gap import effects as fx, simconfig
-from khepera_noise_ros.gap.simulate import EffectEpisodes
+from khepera_noise_ros import simconfig
+from khepera_noise_ros import effects as fx
+from khepera_noise_ros.effects.simulate import EffectEpisodes
 from khepera_noise_ros.nodes import protocol
 from khepera_noise_ros.nodes.evolution_manager import EvolutionManager
 from khepera_noise_ros.nodes.runtime import spinning

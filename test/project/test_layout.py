@@ -9,10 +9,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST = ROOT / 'test'
-FOLDERS = {'core', 'nodes', 'reality', 'experiment', 'recording', 'commands', 'robustness',
-           'project'}
-# The gap tests and their helper stay flat until they move into test/gap/ (issue 25).
-PENDING = {p.name for p in TEST.glob('test_gap_*.py')} | {'test_blind_outside.py'}
+FOLDERS = {'core', 'effects', 'gap', 'nodes', 'reality', 'experiment', 'recording', 'commands',
+           'robustness', 'project'}
 
 
 def local_modules() -> set[str]:
@@ -43,7 +41,7 @@ def offences(path: Path, local: set[str]) -> list[str]:
 
 
 def test_every_test_sits_in_a_folder_of_its_package():
-    flat = {p.name for p in TEST.glob('*.py')} - PENDING - {'conftest.py'}
+    flat = {p.name for p in TEST.glob('*.py')} - {'conftest.py'}
     assert not flat, f'put these in a folder of test/: {sorted(flat)}'
     folders = {p.name for p in TEST.iterdir() if p.is_dir() and p.name != '__pycache__'}
     assert folders <= FOLDERS, f'a new folder of test/: add it to FOLDERS: {folders - FOLDERS}'
@@ -53,7 +51,7 @@ def test_every_test_sits_in_a_folder_of_its_package():
 
 def test_no_test_imports_another_test_or_a_benchmark():
     local = local_modules()
-    files = [p for p in TEST.rglob('*.py') if p.name not in PENDING]
+    files = list(TEST.rglob('*.py'))
     assert len(files) > 40
     found = [f'{p.relative_to(ROOT)}:{o}' for p in files for o in offences(p, local)]
     assert not found, found

@@ -18,7 +18,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from khepera_noise_ros import recording
 from khepera_noise_ros.bag import read_bag, write_bag
 from khepera_noise_ros.experiment import config as replicate_config
-from khepera_noise_ros.gap import effects as fx, simconfig
+from khepera_noise_ros import simconfig
+from khepera_noise_ros import effects as fx
 from khepera_noise_ros.nodes.checkpoint import FORMAT as CHECKPOINT, Checkpoint
 from khepera_noise_ros.reality.effects import EFFECTS, EffectsConfig
 from khepera_noise_ros.testing.recordings import sample_recording
@@ -221,7 +222,7 @@ def test_any_checkpoint_file_loads_or_is_refused(data, values):
     shutil.rmtree(path.parent)
 
 
-# -- the simulator's effects parameter (gap/effects.py) --------------------------------
+# -- the simulator's effects parameter (effects/) ---------------------------------------
 
 @SETTINGS
 @given(data=st.data())
