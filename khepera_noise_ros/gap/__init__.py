@@ -5,7 +5,8 @@
   target      recordings against the simulator         evidence    what locates an effect
   compare     z, Holm, discrepancy, where              families    the statistic families
   stationary  statistics of stationary recordings      closedloop  ... of closed-loop ones
-  converter   dropouts, limits, the lattice            bootstrap   the block bootstrap
-  replay      a protocol in the simulator              protocol    what a recording is
-  split       fit and held-out parts                   allan       Allan deviation
+  converter   limits, the lattice                      dropouts    lost readings, counted
+  bootstrap   the block bootstrap                      replay      a protocol in the simulator
+  protocol    what a recording is                      split       fit and held-out parts
+  allan       Allan deviation
 """

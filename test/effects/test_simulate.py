@@ -8,10 +8,9 @@ import pytest
 from khepera_noise_ros.core import network, task
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.core.streams import UNIT
-from khepera_noise_ros.effects import (IntensityDependentNoise, SaturationQuantization,
-                                       SensorGainOffset, SensorLatency, TemporalDrift)
-from khepera_noise_ros.effects.simulate import (EffectEpisodes, SimCache, entropy, sense,
-                                                stationary)
+from khepera_noise_ros.effects import (IntensityDependentNoise, SensorGainOffset,
+                                       SensorLatency, TemporalDrift)
+from khepera_noise_ros.effects.simulate import EffectEpisodes, sense, stationary
 from khepera_noise_ros.testing.protocols import GENOME
 
 NOISE = NoiseModel.independent_only(0.02)
@@ -138,57 +137,3 @@ def test_drift_on_every_sensor_in_place_equals_the_gathered_columns():
         plain = level.copy()
         plain[:, list(range(7, -1, -1))] *= 1.0 + state
         assert np.allclose(back, plain, rtol=1e-12, atol=0)
-
-
-# -- remembered draws --------------------------------------------------------------------
-
-def _plain_draws(seed_material, calls) -> list:
-    rng = np.random.default_rng(list(seed_material))
-    return [getattr(rng, method)(size) for method, size in calls]
-
-
-def test_remembered_draws_are_the_generators_own():
-    cache = SimCache()
-    seed = entropy(11)
-    a = [('standard_normal', (50, 2, 1)), ('random', (50, 3)), ('standard_normal', 7)]
-    b = [('standard_normal', (50, 2, 1)), ('standard_normal', (50, 1, 1)), ('random', 4)]
-    for calls in (a, a, b, a[:2] + b[1:], b):        # repeats, shared prefixes, new branches
-        rng = cache.generator(seed)
-        got = [getattr(rng, method)(size) for method, size in calls]
-        for mine, plain in zip(got, _plain_draws(seed, calls)):
-            assert mine.dtype == plain.dtype and np.array_equal(mine, plain)
-            mine *= 0.0                 # a copy: what is remembered stays as it was
-    assert len(cache.kept) == 7
-    # another use of the generator gets the generator itself, at its point in the stream
-    rng = cache.generator(seed)
-    first = rng.standard_normal((50, 2, 1))
-    ints = rng.integers(0, 10, 5)
-    after = rng.standard_normal(3)
-    plain = np.random.default_rng(list(seed))
-    assert np.array_equal(first, plain.standard_normal((50, 2, 1)))
-    assert np.array_equal(ints, plain.integers(0, 10, 5))
-    assert np.array_equal(after, plain.standard_normal(3))
-
-
-def test_remembered_draws_are_bounded_and_survive_forgetting():
-    cache = SimCache(max_bytes=3 * 8 * 100)
-    seed = entropy(3)
-    calls = [('standard_normal', 100)] * 5
-    for _ in range(2):
-        rng = cache.generator(seed)
-        got = [rng.standard_normal(100) for _ in calls]
-        assert all(np.array_equal(m, p) for m, p in zip(got, _plain_draws(seed, calls)))
-        assert cache.size <= cache.max_bytes and len(cache.kept) == 3
-
-
-def test_a_run_with_remembered_draws_equals_one_with_a_fresh_generator(monkeypatch):
-    effects = (TemporalDrift((0, 2), 0.03, 5.0, False), IntensityDependentNoise((1, 3)),
-               SaturationQuantization((4,), dropout=0.05))
-    base = np.full((200, 8, 2), 400.0)
-    cache = SimCache()
-    first = stationary(base, NOISE, effects, 5, cache=cache)
-    again = stationary(base, NOISE, effects, 5, cache=cache)
-    monkeypatch.setattr(SimCache, 'generator',
-                        lambda self, seed_material: np.random.default_rng(seed_material))
-    fresh = stationary(base, NOISE, effects, 5, cache=SimCache())
-    assert np.array_equal(first, fresh) and np.array_equal(again, fresh)

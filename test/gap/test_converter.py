@@ -8,7 +8,7 @@ import pytest
 from khepera_noise_ros.effects import SaturationQuantization
 from khepera_noise_ros.effects.base import Key
 from khepera_noise_ros.effects.fitting import Z_DETECT
-from khepera_noise_ros.gap import bootstrap, closedloop, converter, stationary
+from khepera_noise_ros.gap import bootstrap, closedloop, converter, dropouts, stationary
 from khepera_noise_ros.gap.families import of_part
 from khepera_noise_ros.gap.protocol import kind
 from khepera_noise_ros.gap.target import Repaired, Target
@@ -24,7 +24,7 @@ def _runs(n, length):
 
 
 def _marks(x, runs, moving=False):
-    return converter.repair(x, runs, moving)[1]
+    return dropouts.repair(x, dropouts.Runs(runs, len(x)), moving)[1]
 
 
 # -- dropouts on hand-made readings -------------------------------------------------------
@@ -38,7 +38,7 @@ def test_isolated_extremes_are_marked_and_repaired_and_nothing_else():
     x[lost, 1] = 1023.0                                  # to the top of a 10-bit scale
     x[lost & (np.arange(6000) % 2 == 0), 1] = 0.0        # ... or to zero
     runs = _runs(6000, 300)
-    repaired, marks, ends = converter.repair(x, runs)
+    repaired, marks, ends = dropouts.repair(x, dropouts.Runs(runs, len(x)))
     assert marks[:, 0, 0].sum() >= 0.95 * lost.sum()     # pairs next to each other too
     assert np.array_equal(marks[:, 0, 0] > 0, lost & (marks[:, 0, 0] > 0))
     assert marks[:, 1, :].sum() >= 0.95 * lost.sum()
@@ -127,7 +127,7 @@ def test_dropout_statistics_see_the_dropouts_and_the_others_do_not():
     lossy = dropped(rec, (3,), 0.02, 0.0)
     clean_stats, lossy_stats = (Target([r], CONFIG, replicates=0).real for r in (rec, lossy))
     index = clean_stats.index
-    key = Key('dropout', (3,), None, converter.ENDS[0])
+    key = Key('dropout', (3,), None, dropouts.ENDS[0])
     assert clean_stats.estimate[index[key]] == 0.0
     assert lossy_stats.estimate[lossy_stats.index[key]] == pytest.approx(0.02, abs=0.008)
     spreads = [k for k in clean_stats.keys if k.family == 'spread' and k.sensors == (3,)]
@@ -141,11 +141,11 @@ def test_dropout_statistics_see_the_dropouts_and_the_others_do_not():
 def test_the_fit_counts_dropouts_in_closed_loop_recordings_against_the_simulator():
     closed = recorded(closed_loop_protocol(24), seed=6)
     target = Target([dropped(closed, ALL, 0.01, 0.0)], CONFIG, seed=1, replicates=0)
-    lost = converter.dropouts(target.real_data, target.simulate())
+    lost = dropouts.dropouts(target.real_data, target.simulate())
     assert len(lost) >= 4
     assert {v for v, _ in lost.values()} == {0.0}
     clean = Target([closed], CONFIG, seed=1, replicates=0)
-    assert converter.dropouts(clean.real_data, clean.simulate()) == {}
+    assert dropouts.dropouts(clean.real_data, clean.simulate()) == {}
 
 
 def test_a_repaired_recording_keeps_its_marks_and_extremes():
@@ -326,11 +326,11 @@ def test_rare_counts_are_the_marks_of_the_channels_used():
     ready = Repaired.of(rec)
     marks = ready.marks
     assert marks[:, [1, 4, 6]].sum() > 10
-    counts = converter.counts([ready])
+    counts = dropouts.counts([ready])
     hits = np.count_nonzero(marks[:, [6, 1, 4, 0]], axis=0)
     for k, sensor in enumerate([6, 1, 4, 0]):
-        for end, name in enumerate(converter.ENDS):
+        for end, name in enumerate(dropouts.ENDS):
             assert counts[Key('dropout', (sensor,), None, name)] == \
                 [float(hits[k, end]), float(len(rec))]
-    pooled = counts[Key('dropout', (6, 1, 4, 0), None, converter.ENDS[0])]
+    pooled = counts[Key('dropout', (6, 1, 4, 0), None, dropouts.ENDS[0])]
     assert pooled == [float(hits[:, 0].sum()), 4.0 * len(rec)]

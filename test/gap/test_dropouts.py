@@ -13,7 +13,7 @@ import pytest
 from khepera_noise_ros.effects import (ActuatorTurnError, CorrelatedNoise,
                                        IntensityDependentNoise, SaturationQuantization,
                                        SensorGainOffset, SensorLatency, TemporalDrift)
-from khepera_noise_ros.gap import converter, diagnose
+from khepera_noise_ros.gap import dropouts, diagnose
 from khepera_noise_ros.gap.families import having
 from khepera_noise_ros.gap.target import Target
 from khepera_noise_ros.testing.protocols import (CONFIG, closed_loop_protocol, dropped,
@@ -50,7 +50,7 @@ def dropout_in_set(result) -> bool:
 
 
 def _count_copies(target):
-    return converter.count_copies(sum(len(r) for r in target.recordings), target.copies)
+    return dropouts.count_copies(sum(len(r) for r in target.recordings), target.copies)
 
 
 # -- the counts --------------------------------------------------------------------------

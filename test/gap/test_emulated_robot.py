@@ -1,4 +1,5 @@
-"""The emulated robot (``reality``) with its six default effects, recorded as the blind
+"""The emulated robot (``reality``) with the six effects of its first calibration
+(``real_robot_v1``: every one in the diagnosis's vocabulary), recorded as the blind
 benchmark records it (``testing.emulated``): the diagnosis finds them as a set, and the
 simulator given their true parameters (an oracle the diagnosis never sees) leaves
 little of the gap.
@@ -8,7 +9,7 @@ sensor's converter saturates the noisy reading once, at the end; the simulator u
 clip the light level before adding its noise, so a level that a light-stage effect took
 beyond the range read the range's end plus noise, and the true effects left a
 value-lattice gap (the pile at 525 of the darkest readings) that hid the robot's group
-noise and its drift (docs/diagnosis.md, "The emulated robot's effects as a set").
+noise and its drift (docs/studies/emulated-robot-set.md).
 """
 import pytest
 
@@ -35,7 +36,7 @@ def diagnosis():
     """The diagnosis of the robot at 240 samples per heading, where its group noise shows
     (a long recording is replayed in fewer copies, so this costs little more than 60
     samples)."""
-    config = EffectsConfig.real_robot()
+    config = EffectsConfig.real_robot_v1()
     options = diagnose.Options(config=emulated.simulator(config), replicates=100)
     return config, diagnose.diagnose(_recordings(config, samples=LONG), options)
 
@@ -91,7 +92,7 @@ def test_with_longer_runs_its_own_drift_is_fitted():
     noise it does not share with the others: the drift's fitter finds it on every
     sensor, one wander each, near its size and time constant.  The flicker alone
     swamped it before."""
-    config = EffectsConfig.real_robot()
+    config = EffectsConfig.real_robot_v1()
     recs = _recordings(config, samples=LONG, episodes=2)
     fit_part, _ = emulated.parts(recs[:1], config)
     true = emulated.true_effects(config)
@@ -112,7 +113,7 @@ def test_a_saturating_flicker_leaves_no_pile_up_gap_with_its_true_parameters():
     noise: in the dark room many readings sit at 525.  The simulator given the flicker's
     true parameters reproduces the pile there (the statistics of the value lattice:
     pile-up, mode share, granularity) at the paper's rounding."""
-    config = EffectsConfig.real_robot().only('intensity_dependent_noise')
+    config = EffectsConfig.real_robot_v1().only('intensity_dependent_noise')
     recs = _recordings(config, samples=60, episodes=2)[:1]
     _, held = emulated.parts(recs, config)
     c = held.compare([emulated.true_effects(config)['intensity_dependent_noise']])
@@ -125,7 +126,7 @@ def oracle_240():
     """The robot's six effects with their true parameters in the simulator (the paper's
     rounding), on the held-out half of a recording with 240 samples per heading:
     (target, its comparison with all six, the true effects)."""
-    config = EffectsConfig.real_robot()
+    config = EffectsConfig.real_robot_v1()
     recs = _recordings(config, samples=LONG, episodes=2)[:1]
     _, held = emulated.parts(recs, config)
     true = emulated.true_effects(config)
@@ -158,7 +159,7 @@ def test_given_the_robots_true_effects_the_papers_rounding_is_kept(lattice_choic
     paper's rounding at the level.  Given the robot's true effects the value-lattice
     statistics keep it; before, with the level clipped, they chose rounding at the
     reading (the pile at 525 it restored stood for the saturation)."""
-    config = EffectsConfig.real_robot()
+    config = EffectsConfig.real_robot_v1()
     recs = _recordings(config, samples=60, episodes=2)[:1]
     fit_part, _ = emulated.parts(recs, config)
     choice = lattice_choice(fit_part, list(emulated.true_effects(config).values()))

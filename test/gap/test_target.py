@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.effects import SaturationQuantization, SensorLatency, TemporalDrift
-from khepera_noise_ros.gap import converter
+from khepera_noise_ros.gap import dropouts
 from khepera_noise_ros.gap.protocol import episodes
 from khepera_noise_ros.gap.replay import Replayer
 from khepera_noise_ros.gap.target import Target
@@ -71,11 +71,12 @@ def test_a_remembered_replay_is_the_repaired_replay(monkeypatch):
     t = Target([rec], CONFIG, seed=2)
     sim = t.simulate([effect])[0]
     calls = []
-    monkeypatch.setattr(converter, 'repair', lambda *a, **kw: calls.append(1))
+    monkeypatch.setattr(dropouts, 'repair', lambda *a, **kw: calls.append(1))
     assert t.simulate([effect])[0] is sim and calls == []     # not repaired again
     monkeypatch.undo()
     fresh = Replayer(rec, CONFIG).replay((effect,), seed=2, copies=t.copies)
-    repaired, marks, _ = converter.repair(fresh.readings, episodes(fresh))
+    repaired, marks, _ = dropouts.repair(fresh.readings,
+                                         dropouts.Runs(episodes(fresh), len(fresh)))
     assert marks.sum() > 0
     assert np.array_equal(sim.recording.readings, repaired)
     assert np.array_equal(sim.marks, marks)

@@ -227,8 +227,8 @@ def test_any_checkpoint_file_loads_or_is_refused(data, values):
 @SETTINGS
 @given(data=st.data())
 def test_any_effects_parameter_loads_or_is_refused(data):
-    name = data.draw(st.sampled_from(sorted(fx.TYPES)))
-    fields = [f.name for f in dataclasses.fields(fx.TYPES[name])]
+    name = data.draw(st.sampled_from(sorted(fx.REGISTRY)))
+    fields = [f.name for f in dataclasses.fields(fx.REGISTRY[name])]
     effect = {'name': name, **data.draw(st.dictionaries(
         st.sampled_from(fields + ['junk']), yaml_values, max_size=len(fields)))}
     text = data.draw(st.one_of(st.just(json.dumps([effect], default=str)),
