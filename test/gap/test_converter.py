@@ -313,8 +313,10 @@ def test_pile_ends_from_the_histogram_are_the_edge_hits_of_every_sample():
         x = _integer_columns(rng)
         spread_out += int(np.ptp(x) >= 1e5)        # over 1e5 values: the per-sample way
         n = len(x)
+        whole = stationary.Grouping(np.zeros(n, np.int64), 1, np.zeros(1, np.int64),
+                                    np.zeros(1, np.int64))       # every sample in one group
         sums = converter.stationary_sums(x, np.zeros(x.shape + (2,)), np.zeros(n, int),
-                                         np.arange(n), lambda v: v.sum(axis=0)[None])
+                                         np.arange(n), whole)
         assert np.array_equal(sums['edge'][0], converter.edge_hits(x).sum(axis=0))
     assert spread_out > 0
 
