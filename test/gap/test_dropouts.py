@@ -168,12 +168,29 @@ def test_dropouts_beside_a_gain_are_added_at_forty_replicates():
 
 
 def test_closed_loop_dropouts_beside_a_turn_error_are_both_in_the_chosen_set():
-    real = dropped(closed([ActuatorTurnError(0.7, 0.1)]), ALL, 0.01, 0.0)
+    """The dropouts happen in the loop, as a robot's do: the controller sees them (put in
+    after the recording, the simulator's dropouts would move a loop the robot's never did,
+    and a model predicting the closed loop worse is not kept)."""
+    real = closed([ActuatorTurnError(0.7, 0.1),
+                   SaturationQuantization(ALL, dropout=0.01, dropout_value=0.0)])
     result = diagnose.diagnose([real], BESIDE)
     assert 'actuator_turn_error' in chosen(result)
     assert dropout_in_set(result), chosen(result)
     assert any(w['statistic'] == 'closed_loop_dropout' and w['significant']
                for w in result.where)
+
+
+def test_dropouts_the_controller_never_saw_are_not_kept_since_they_predict_the_loop_worse():
+    """Dropouts put into a closed-loop recording afterwards (a logging fault: the controller
+    never saw them): the simulator's dropouts would move the loop the robot's never did, so
+    the converter's model predicts the held-out closed loop worse and is not kept."""
+    real = dropped(closed([ActuatorTurnError(0.7, 0.1)]), ALL, 0.01, 0.0)
+    result = diagnose.diagnose([real], BESIDE)
+    assert 'actuator_turn_error' in chosen(result)
+    assert not dropout_in_set(result), chosen(result)
+    vetoed = [e for e in result.effects + (result.compound.rejected if result.compound else [])
+              if e.get('closed_loop_worse')]
+    assert 'saturation_quantization' in [e['name'] for e in vetoed], result.compound.rejected
 
 
 def test_dropouts_in_both_protocols_are_named_not_taken_for_a_turn_error():
