@@ -162,7 +162,8 @@ def recommendation(arms: dict) -> dict:
     v = d['versus_stock']
     ok = v['verdict'] != 'worse' and v['difference'] >= 0
     if ok:
-        reason = f"its controllers score on the robot {v['text']}"
+        verb = 'did' if v['verdict'] == 'better' else 'showed'
+        reason = f"on the robot its controllers {verb} {v['text']}"
     elif v['verdict'] == 'worse':
         reason = f"its controllers score on the robot worse than the stock simulator's: " \
                  f"{v['difference']:+.3f} [{v['ci_low']:+.3f}, {v['ci_high']:+.3f}]"
