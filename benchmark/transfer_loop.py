@@ -11,7 +11,7 @@ core backend, no ROS), what a user with the robot attached runs
 
 1. record the section-2 stationary protocol (4 conditions x 5 headings x 60 samples) and
    40 closed-loop episodes driven by a controller from the stock simulator, one robot,
-   one episode after another (``recording.inprocess``, as ``khepera-noise record``);
+   one episode after another (``reality.record``, as ``khepera-noise record``);
 2. diagnose them with the defaults of ``khepera-noise diagnose`` and write its outputs;
 3. the transfer experiment of ``diagnose --transfer-emulator`` with the ceiling
    (``experiment.transfer``): stock, independent, combination, diagnosed and
@@ -45,8 +45,9 @@ from khepera_noise_ros.core.khepera import World  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.experiment import transfer, transfer_stats  # noqa: E402
 from khepera_noise_ros.experiment.transfer_report import share_text  # noqa: E402
-from khepera_noise_ros.gap import diagnose, report  # noqa: E402
-from khepera_noise_ros.recording import inprocess  # noqa: E402
+from khepera_noise_ros.experiment import diagnosis_report as report  # noqa: E402
+from khepera_noise_ros.gap import diagnose  # noqa: E402
+from khepera_noise_ros.reality import record as inprocess  # noqa: E402
 from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
 from khepera_noise_ros.reality.world import EmulatedWorld  # noqa: E402
@@ -64,7 +65,7 @@ def world_of(name: str, copies: int, salt: int):
         return EmulatedWorld(EffectsConfig.load(EMULATOR), seed=salt, robots=copies,
                              start_bearing_deg=0.0)
     from foreign import params
-    from foreign_robots import robot_path
+    from foreign.cli import robot_path
     robot = params.load(robot_path(name))
     from foreign.robot import ForeignWorld
     return ForeignWorld(robot, copies, seed=robot['unit_seed'] + salt)
@@ -166,7 +167,7 @@ def main(argv=None) -> int:
                    help="each robot's diagnosis.json and fitted params")
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
-    from foreign_robots import benchmark_robots
+    from foreign.cli import benchmark_robots
     names = args.robots or ['emulator'] + benchmark_robots()
     wall, cpu = time.monotonic(), time.process_time()
     config = simconfig.SimConfig()

@@ -22,7 +22,8 @@ from pathlib import Path
 from ..effects import NAMES
 from .. import simconfig
 from ..experiment import transfer, transfer_report
-from ..gap import diagnose, report
+from ..experiment import diagnosis_report as report
+from ..gap import diagnose
 from ..gap.protocol import BASES, condition_world
 from ..recording import load
 from . import _transfer

@@ -1,17 +1,5 @@
-"""Allan deviation of the residuals: fast (white) noise against slow change, per sensor and
-for the component all sensors share.
-
-The overlapping Allan deviation at averaging time tau = m samples (the tool of
-IMU noise identification) falls as tau^-1/2 for white noise, stays flat for
-flicker noise, grows as tau^+1/2 for a random walk and as tau^+1 for a drift
-(a ramp).  A slow change shared by many sensors (room light, temperature, the
-supply) shows as the shared component's deviation at long tau standing above
-the simulator's; fast noise shared in groups shows at short tau only.
-
-Residuals are readings about each run's mean (a run: one episode at one heading
-and condition), so the light model's levels do not count; each run is a
-separate stretch, and the sums of squares are pooled over runs.
-"""
+"""Allan deviation of the run residuals, per sensor and shared: white noise falls as
+tau^-1/2, a wander grows (docs/diagnosis.md, "Allan deviation")."""
 from __future__ import annotations
 
 from typing import Any, Sequence

@@ -1,14 +1,5 @@
-"""The project's block bootstrap: the one block-length rule, and stratified resampling of
-per-block sums.
-
-A recording is cut into blocks (stationary data: consecutive samples of one run;
-closed loop: whole episodes), each reduced to sufficient sums; every statistic is a
-smooth function of those sums added up per stratum.  Resampling blocks with
-replacement within each stratum then costs one small matrix product per stratum, and
-keeps the autocorrelation inside blocks.  The block length: Politis and White (2004),
-corrected by Patton, Politis and White (2009), for the circular block bootstrap; several
-series take the longest any of them needs, and stretches (runs) are never joined.
-"""
+"""The project's block bootstrap: the one block-length rule (Politis and White) and
+stratified resampling of per-block sums."""
 from __future__ import annotations
 
 import math

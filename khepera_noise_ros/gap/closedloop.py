@@ -1,23 +1,5 @@
-"""The statistics of closed-loop recordings, from per-episode sums (episodes are the blocks).
-
-The task's own: ``closed_loop_level`` per sensor; the fitness factors and the turn
-power by step after a knock; the share of right turns; the regression of the readings'
-next change on the commands u(t) and u(t-1) (``turn_response``, per sensor
-``sensor_turn_response``); with recorded headings the turn per unit of command
-(``turn_size``).  The turn's scatter by band of power (``turn_scatter``, with headings
-``turn_size_scatter``): a zero-mean random slip leaves means alone and shows there.
-The noise while the robot turns (family ``loop_<view>_<spread|correlation|
-autocorrelation>``), in three views:
-
-* ``still``: first differences where the last command did not turn the robot and no
-  knock came (the light did not move; headings need not be known);
-* ``residual`` (headings recorded): readings less a fit in heading and the two turns
-  around it within (condition, 10-degree bin) cells, each sensor at the delay (0..3
-  steps) whose heading fits it best, so that a latency leaves its noise visible;
-* ``change`` (no stationary recording, headings unknown): each reading's next change
-  less its regression on the last four commands and their products with every reading
-  (the light's part); the residual is two noise draws.
-"""
+"""The statistics of closed-loop recordings from per-episode sums: levels, fitness factors,
+turn responses and scatter, and the noise while turning in three views (docs/diagnosis.md)."""
 from __future__ import annotations
 
 from typing import Callable
@@ -87,10 +69,8 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
                              u[ok, None] * r[ok] / 100.0], axis=1)
     w = _bands(u[ok])
     parts['scatter_n'] = _by(e, w, m)
-    parts['scatter_xx'] = _by(e, w[:, :, None, None] * (design[:, :, None] * design[:, None, :])
-                              [:, None], m)
-    parts['scatter_xy'] = _by(e, w[:, :, None, None] * (design[:, :, None] * dr[:, None, :])
-                              [:, None], m)
+    parts['scatter_xx'] = _by_band(e, w, design[:, :, None] * design[:, None, :], m)
+    parts['scatter_xy'] = _by_band(e, w, design[:, :, None] * dr[:, None, :], m)
     parts['scatter_yy'] = _by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
         t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
@@ -108,11 +88,26 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
 
 
 def _by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product)."""
-    pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
-                             shape=(episodes, ep.size))
-    out: Array = np.asarray(pick @ values.reshape(ep.size, -1), np.float64)
+    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product; its
+    rows straight from ``ep`` where that is in order, as it is in episode order)."""
+    n = ep.size
+    if n and np.all(ep[1:] >= ep[:-1]):
+        indptr = np.searchsorted(ep, np.arange(episodes + 1))
+        pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
+    else:
+        pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
+    out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
+
+
+def _by_band(ep: np.ndarray, w: Array, values: Array, episodes: int) -> Array:
+    """(episodes, bands, ...) sums of ``values`` by episode and band (``w``: one-hot): each
+    row is summed into its band only, not masked into every band."""
+    inside = w.any(axis=1)
+    bands = w.shape[1]
+    code = ep[inside] * bands + w[inside].argmax(axis=1)
+    return _by(code, values[inside], episodes * bands).reshape(
+        (episodes, bands) + values.shape[1:])
 
 
 def _bands(u: Array) -> Array:

@@ -1,12 +1,5 @@
-"""Real against simulated statistics: standardised differences, their significance, and the
-discrepancy an effect has to shrink.
-
-Each statistic's difference is divided by its standard error, the root of the sum of
-the two bootstrap variances (floored by its family's least error), to give z.
-Significance is Holm's step-down correction over every statistic compared.  The
-*discrepancy* is  sum over statistics of max(|z| - 2, 0)^2: each statistic counts by how
-far it lies beyond two standard errors, so the many that agree add (almost) nothing.
-"""
+"""Real against simulated statistics: z, Holm significance, the discrepancy
+(sum of max(|z| - 2, 0)^2), and where the gap lies."""
 from __future__ import annotations
 
 import copy

@@ -1,18 +1,5 @@
-"""The diagnosis: where the gap lies, which unmodelled effect causes it, how far it shrinks.
-
-1. Where: every statistic of the real recordings against the simulator's replay of the
-   same protocol, ranked by standardised difference (``compare``).
-2. Which: the recordings are split (``split``); every registered effect is located and
-   fitted on one part (its own ``fit``), added to the simulator, and scored on the other
-   part by the share of the discrepancy it removes; then a set of effects is chosen by
-   forward selection (``select``), and what they leave is described and modelled as
-   measured (``empirical_noise``).
-3. How far: the held-out discrepancy before and after, with bootstrap intervals.
-
-Where the simulator rounds the reading is chosen from the value lattice (``_rounding``).
-The verdict is ``none`` when no statistic differs significantly or no effect removes a
-significant share of the gap.
-"""
+"""The diagnosis: where the gap lies, which unmodelled effect causes it, how far adding it
+shrinks the gap on held-out data (the steps: docs/diagnosis.md, "How it works")."""
 from __future__ import annotations
 
 import dataclasses

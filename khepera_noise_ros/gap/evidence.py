@@ -1,20 +1,5 @@
-"""Measurements that locate an effect, real recordings against their replays: which sensors'
-noise is shared (fast or slow part), which wander on their own, whether the levels
-change together over time, and the spread's excess by light level.
-
-* Group evidence: per lighting condition, the Fisher z of the real against the
-  simulated correlation of each pair's *fast* part (first differences within a run: a
-  slow change cancels) or *slow* part (means of consecutive windows), Stouffer-combined
-  over conditions.  Closed loop alone: the comparison's own noise correlations.
-* Own wander: each sensor's residual less its per-run regression on the mean of the
-  others (what it does not share), its autocorrelation at ``OWN_LAGS`` real against
-  simulated (one-sided z, Holm); wandering sensors are taken out of the shared part one
-  at a time.
-* Shared change: each run's *shared factor*, the median over sensors of the run's mean
-  over the simulated level of its cell (each sensor's calibration line taken out);
-  factors that vary more from run to run than the simulator's (an F test on their log
-  spread, beyond what fast shared noise adds) are a shared change over time.
-"""
+"""Measurements that locate an effect, real recordings against their replays: shared fast or
+slow noise (group evidence), own wanders, a shared change, the spread by light level."""
 from __future__ import annotations
 
 from typing import Any, Callable, Sequence

@@ -1,12 +1,5 @@
-"""The registry of statistic families: each family's facts, declared once.
-
-Every statistic the diagnosis compares belongs to a family (``level``, ``spread``,
-``turn_response`` ...).  A family declares here the part of the comparison it counts in
-(a step of the compound selection is judged per part: a turn error acts only on the
-closed loop's statistics), the least standard error it can have, and whether only a
-limit is fitted to it or the rounding choice reads it.  Every module that needs one of
-these facts reads ``FAMILIES``; a family missing from it is an error, not a default.
-"""
+"""The registry of statistic families: each family's part, floor and use, declared once;
+a family missing from it is an error, not a default."""
 from __future__ import annotations
 
 import functools

@@ -1,15 +1,5 @@
-"""A recording's protocol reproduced in the simulator.
-
-Stationary data: every episode is simulated as one continuous run through its headings
-and conditions (effects with memory carry over from one heading to the next), in the
-world of each condition (the manifest's world parameters over the simulator's).  Where
-the light model cannot describe the data (not 8 channels, headings unknown, conditions
-without world parameters) the simulated light is the recording's own run means
-("observed" base): noise, correlation and time structure can be compared, levels
-cannot.  Closed-loop data: the manifest's genome runs as many episodes per condition
-under the simulator's task.  ``copies`` > 1 simulates independent copies as extra
-episodes, which makes the simulated statistics more precise than the real ones.
-"""
+"""A recording's protocol reproduced in the simulator (stationary: one continuous run per
+episode; closed loop: the manifest's genome), in the world of each condition."""
 from __future__ import annotations
 
 import dataclasses

@@ -1,18 +1,5 @@
-"""The compound diagnosis: a set of effects chosen by forward selection on held-out data.
-
-From the best single effect, each step fits every remaining candidate jointly with those
-already chosen (``Target.with_given``), scores the simulator with them on the held-out
-part, and keeps a candidate only if it lowers the held-out discrepancy significantly (in
-``1 - STEP_ALPHA`` of the paired bootstrap replicates) and by enough: ``MIN_ADDED`` of
-the discrepancy before any effect, or ``MIN_LOCAL`` of one part's own (a turn error acts
-only on the closed loop's statistics), or ``MIN_LEFT`` of what the chosen effects leave
-of one part, or ``MIN_LOCAL`` of one family's, or by the part it acts on alone
-(``part_step``); the last three are confirmed on a second simulator seed.  With the best
-candidate the chosen effects are refitted given the others (one backfitting pass), each
-refit kept only where it lowers the fitting part's discrepancy.  A latency and a turn
-error are also fitted each without the other (``_loop_pair``).  Among candidates that
-explain the data as well, the one with fewer free parameters is taken (``as_good``).
-"""
+"""The compound diagnosis: forward selection of effects on held-out data, each fitted jointly
+with those chosen (the rules: docs/diagnosis.md, "The compound")."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

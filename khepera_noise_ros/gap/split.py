@@ -1,10 +1,5 @@
-"""Splitting real recordings into a part to fit on and a part held out from the fit.
-
-By episode (the default): within each condition, alternate episodes go to the
-fit and to the hold-out; a condition with a single episode is cut in time
-instead, its first half fitted.  By condition: the named conditions are held
-out whole, so an effect fitted in some lighting is checked in another.
-"""
+"""Real recordings split into a part to fit on and a part held out (by episode, or by
+condition)."""
 from __future__ import annotations
 
 from typing import Iterable, Sequence

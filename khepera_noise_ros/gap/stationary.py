@@ -1,17 +1,5 @@
-"""The statistics of stationary recordings, from per-block sums.
-
-A cell is a (condition, heading); a run is one episode in one cell, in step order; a
-block is up to ``length`` consecutive samples of a run (a lone sample carries no
-spread and is left out).  Residuals are readings about their run's mean.  Per cell:
-``level`` and ``spread``; per condition: ``correlation`` of every pair,
-``autocorrelation`` at ``LAGS``, ``kurtosis``, and ``own_autocorrelation``: the
-autocorrelation of what each sensor does not share with the others (its residual less
-its regression on the others' mean, per run, the first ``SKIP`` samples left out), where
-a wander of its own shows beside a fast noise all sensors share.  Per sensor:
-``spread_vs_level`` (the slope over cells) and ``step_response``: the first
-``STEP_LAGS`` samples after a change of heading, as the share of the change not yet
-followed (0 at once, 1 while the sensor still reports the old heading).
-"""
+"""The statistics of stationary recordings from per-block sums: per cell (condition,
+heading) and per condition, over residuals about each run's mean."""
 from __future__ import annotations
 
 import functools
