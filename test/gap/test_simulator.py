@@ -1,14 +1,9 @@
 """The simulator side of the diagnosis: fitted effects in a params file the simulator node
-loads, and the transfer experiment."""
-import pytest
-
-from khepera_noise_ros.core.evolution import EAConfig
-from khepera_noise_ros.core.khepera import World
+loads (the transfer experiment: test/experiment/test_transfer.py)."""
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.effects import (ActuatorTurnError, CorrelatedNoise, SensorGainOffset,
                                        TemporalDrift)
 from khepera_noise_ros import simconfig
-from khepera_noise_ros.experiment import transfer
 
 
 def test_effects_and_parameters_round_trip_through_a_params_file(tmp_path):
@@ -36,22 +31,3 @@ def test_the_simulator_node_loads_the_written_params_file(tmp_path, ros_context)
                       'independent_level': 0.015, 'dependence_groups': '2,3',
                       'distribution': 'normal', 'rounding': 'level'}
     assert simconfig.from_parameters({'effects': effects}).effects == config.effects
-
-
-def test_transfer_gap_is_zero_when_reality_is_the_simulator_and_reported_both_ways():
-    config = simconfig.SimConfig(noise=NoiseModel.independent_only(0.02))
-    reality = transfer.SimEvaluator(config, World())
-    calls = []
-
-    def real(genomes, seeds):
-        calls.append(len(seeds))
-        return reality(genomes, seeds)
-    out = transfer.run(config, World(), [ActuatorTurnError(0.5, 0.0)], real, trials=2,
-                       ea=EAConfig(population=4, generations=2), test_episodes=3)
-    assert calls == [6, 6]
-    assert out['fitness_gap_before'] == pytest.approx(0.0, abs=1e-6)
-    assert out['fitness_gap_after'] != pytest.approx(0.0, abs=1e-6)
-    assert out['trials'] == 2
-    assert set(out) >= {'fitness_gap_before', 'fitness_gap_after', 'trials', 'gap_p'}
-    with pytest.raises(ValueError, match='at least 2 trials'):
-        transfer.run(config, World(), [], real, trials=1)
