@@ -28,9 +28,12 @@ setup(
         'bags': ['rosbags'],
         # statsmodels: an independent check of the power and TOST code (docs/statistics.md);
         # hypothesis: property tests of parsers and fitters; arch and allantools: reference
-        # implementations the block-length rule and the Allan deviation are checked against.
-        'test': ['pytest', 'rosbags', 'flake8', 'ros-ament-flake8', 'statsmodels', 'hypothesis',
-                 'arch', 'allantools'],
+        # implementations the block-length rule and the Allan deviation are checked against;
+        # pytest-xdist: the suite on every core; mypy (and the stubs of what it reads): the
+        # type check test/project/test_types.py runs.
+        'test': ['pytest', 'pytest-xdist', 'rosbags', 'flake8', 'ros-ament-flake8',
+                 'statsmodels', 'hypothesis', 'arch', 'allantools', 'mypy', 'scipy-stubs',
+                 'types-PyYAML'],
     },
     zip_safe=True,
     maintainer='khepera_noise_ros maintainers',

@@ -1,9 +1,10 @@
 """How long the gap diagnosis takes (prints figures; not a test).
 
-    python benchmark/bench_diagnose.py [--repeat 1] [--skip-long]
+    python benchmark/bench_diagnose.py [--repeat 1] [--skip-long] [--robot v1|default]
 
-Two recordings from the emulated robot with its default effects
-(``EffectsConfig.real_robot()``), both stationary, as ``benchmark/blind_gap.py``
+Two recordings from the emulated robot with its effects (``--robot v1``, the default
+here: ``EffectsConfig.real_robot_v1()``, the robot the speed targets were set on;
+``default``: today's ``real_robot()``), both stationary, as ``benchmark/blind_gap.py``
 records them:
   default   the blind benchmark's protocol, 60 samples per heading and condition
   long      about 36,000 samples x 8 sensors (one hour at 10 Hz)
@@ -35,15 +36,18 @@ from khepera_noise_ros.reality.effects import EffectsConfig  # noqa: E402
 LONG_SAMPLES = 36_000
 
 
-def recording(samples: int, seed: int = 0):
-    world = robot(EffectsConfig.real_robot(), seed)
+ROBOTS = {'v1': EffectsConfig.real_robot_v1, 'default': EffectsConfig.real_robot}
+
+
+def recording(samples: int, seed: int = 0, which: str = 'v1'):
+    world = robot(ROBOTS[which](), seed)
     return record_stationary(world, STATIONARY, samples=samples, repeats=REPEATS)
 
 
-def timed(rec, seed: int = 0) -> tuple[float, diagnose.Diagnosis]:
+def timed(rec, seed: int = 0, which: str = 'v1') -> tuple[float, diagnose.Diagnosis]:
     """The simulator is the paper's independent model at the robot's own sensor noise,
     so the gap is the robot's effects."""
-    noise = EffectsConfig.real_robot().sensor_noise
+    noise = ROBOTS[which]().sensor_noise
     options = diagnose.Options(config=SimConfig(noise=NoiseModel.independent_only(noise)),
                                seed=seed)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -56,6 +60,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('--repeat', type=int, default=1)
     p.add_argument('--skip-long', action='store_true')
+    p.add_argument('--robot', choices=sorted(ROBOTS), default='v1')
     args = p.parse_args(argv)
     headings = sum(len(h) for h in STATIONARY.values())
     cases = [('default', SAMPLES)]
@@ -63,10 +68,10 @@ def main(argv=None) -> int:
         cases.append(('long', math.ceil(LONG_SAMPLES / (headings * REPEATS))))
     print('timings on a shared machine: pessimistic')
     for label, per_heading in cases:
-        rec = recording(per_heading)
+        rec = recording(per_heading, which=args.robot)
         times, cpu = [], []
         for k in range(args.repeat):
-            seconds, result = timed(rec, k)
+            seconds, result = timed(rec, k, args.robot)
             times.append(seconds)
             cpu.append(timed.cpu)
         summary = result.to_json().get('compound') or {}

@@ -25,14 +25,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from outside import robot                    # noqa: E402
 from outside.cases import NAMES, draw_cases  # noqa: E402
+from outside.record import make_recording   # noqa: E402
 from outside.score import score_case         # noqa: E402
-from khepera_noise_ros.recording import write_csv  # noqa: E402
 
 TARGETS = {'single_top1': 0.9, 'location_right': 0.9, 'compound_recall': 0.8,
            'compound_precision': 0.8, 'single_median_shrink': 0.8,
@@ -42,19 +39,6 @@ TARGETS = {'single_top1': 0.9, 'location_right': 0.9, 'compound_recall': 0.8,
 def default_command() -> str:
     here = Path(sys.executable).with_name('khepera-noise')
     return str(here) if here.exists() else (shutil.which('khepera-noise') or 'khepera-noise')
-
-
-def make_recording(case: dict, quick: bool, folder: Path) -> Path:
-    """Write the case's 'real' recording; returns its path (NAME without suffix)."""
-    rng = np.random.default_rng([case['seed'], 7])
-    if case['protocol'] == 'closed_loop':
-        rec = robot.closed_loop(case['seed'], case['effects'], 10 if quick else 20, rng)
-    else:
-        headings = (-30.0, 0.0, 45.0) if quick else (-60.0, -20.0, 0.0, 30.0, 90.0)
-        _, rec = robot.stationary(case['seed'], case['effects'], headings, 60, rng)
-    path = folder / 'real'
-    write_csv(rec, path)
-    return path
 
 
 def diagnose(command: list[str], recording: Path, out: Path, seed: int, replicates: int,

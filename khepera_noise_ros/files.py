@@ -15,24 +15,29 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import IO, Any, Iterator, Mapping, TypeGuard, Union, cast
 
 import numpy as np
 
-# the disk refusing, as opposed to a mistake in the path
-REASONS = {errno.ENOSPC: 'no space left on the device', errno.EDQUOT: 'disk quota exceeded',
-           errno.EROFS: 'read-only file system', errno.EACCES: 'permission denied',
-           errno.EPERM: 'operation not permitted', errno.EIO: 'input/output error',
-           errno.EFBIG: 'file too large'}
+StrPath = Union[str, os.PathLike[str]]        # what Path() takes
+
+# the disk refusing, as opposed to a mistake in the path; keyed by OSError.errno (int or None)
+REASONS: dict[int | None, str] = {
+    errno.ENOSPC: 'no space left on the device', errno.EDQUOT: 'disk quota exceeded',
+    errno.EROFS: 'read-only file system', errno.EACCES: 'permission denied',
+    errno.EPERM: 'operation not permitted', errno.EIO: 'input/output error',
+    errno.EFBIG: 'file too large'}
+# errno's names, looked up with OSError.errno as it is (None finds nothing)
+_ERRORCODE = cast('Mapping[int | None, str]', errno.errorcode)
 
 
 class WriteError(OSError):
     """A file the disk would not take; ``str()`` is one line for the user."""
 
-    def __init__(self, path, exc: OSError):
+    def __init__(self, path: StrPath, exc: OSError) -> None:
         super().__init__(exc.errno, str(exc))
         self.path = Path(path)
-        code = errno.errorcode.get(exc.errno, '')
+        code = _ERRORCODE.get(exc.errno, '')
         reason = REASONS.get(exc.errno, exc.strerror or str(exc))
         kept = ('its earlier content is unchanged' if self.path.exists()
                 else 'nothing was written there')
@@ -43,7 +48,7 @@ class WriteError(OSError):
         return self.message
 
 
-def refused(exc: BaseException) -> bool:
+def refused(exc: BaseException) -> TypeGuard[OSError]:
     """Is ``exc`` the disk refusing a write (full, read-only, not allowed)?"""
     return isinstance(exc, OSError) and exc.errno in REASONS
 
@@ -54,11 +59,12 @@ def describe(exc: OSError) -> str:
         return exc.message
     where = f' {exc.filename}' if exc.filename else ''
     return (f'cannot write{where}: {REASONS.get(exc.errno, exc.strerror)} '
-            f'({errno.errorcode.get(exc.errno, exc.errno)}); files finished before are kept')
+            f'({_ERRORCODE.get(exc.errno, exc.errno)}); files finished before are kept')
 
 
 @contextlib.contextmanager
-def atomic_open(path, mode: str = 'w', fsync: bool = True, **kwargs) -> Iterator:
+def atomic_open(path: StrPath, mode: str = 'w', fsync: bool = True,
+                **kwargs: Any) -> Iterator[IO[Any]]:
     """``open(path, mode)`` into a temporary file beside ``path``, renamed into place when the
     block ends without error (flushed and, with ``fsync``, synced first); removed otherwise."""
     path = Path(path)
@@ -81,14 +87,14 @@ def atomic_open(path, mode: str = 'w', fsync: bool = True, **kwargs) -> Iterator
         raise
 
 
-def atomic_write_text(path, text: str) -> Path:
+def atomic_write_text(path: StrPath, text: str) -> Path:
     """Write to a temporary file beside ``path``, then rename it into place."""
     with atomic_open(path) as f:
         f.write(text)
     return Path(path)
 
 
-def staging_path(path) -> Path:
+def staging_path(path: StrPath) -> Path:
     """A path beside ``path`` (not yet there) to build a directory in before
     ``replace_tree`` puts it in place; removed with its parent by ``replace_tree``."""
     path = Path(path)
@@ -99,7 +105,7 @@ def staging_path(path) -> Path:
         raise (WriteError(path, exc) if refused(exc) else exc) from None
 
 
-def replace_tree(staged, path) -> Path:
+def replace_tree(staged: StrPath, path: StrPath) -> Path:
     """Put the directory built at ``staged`` (from ``staging_path``) in place of ``path``:
     the old one is moved aside first and removed only once the new one is in."""
     staged, path = Path(staged), Path(path)
@@ -116,7 +122,7 @@ def replace_tree(staged, path) -> Path:
     return path
 
 
-def _plain(obj):
+def _plain(obj: object) -> object:
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
@@ -124,5 +130,5 @@ def _plain(obj):
     raise TypeError(f'cannot write {type(obj).__name__} as JSON')
 
 
-def write_json(path, data) -> Path:
+def write_json(path: StrPath, data: object) -> Path:
     return atomic_write_text(path, json.dumps(data, indent=2, default=_plain) + '\n')

@@ -15,13 +15,14 @@ import dataclasses
 import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Iterable, Mapping
 
 import yaml
 
 from .core.khepera import WORLD_KEYS, World
 from .core.noise import NoiseModel, format_groups, parse_groups
 from .core.task import Task
-from .files import atomic_write_text
+from .files import StrPath, atomic_write_text
 from . import effects as fx
 
 TASK_KEYS = ('steps', 'perturb_every', 'perturbation_deg')
@@ -36,18 +37,19 @@ class SimConfig:
     noise: NoiseModel = field(default_factory=NoiseModel)
     task: Task = field(default_factory=Task)
     seed: int = 0
-    effects: tuple = ()
+    effects: tuple[fx.Effect, ...] = ()
 
-    def with_effects(self, *added) -> 'SimConfig':
+    def with_effects(self, *added: fx.Effect) -> 'SimConfig':
         return dataclasses.replace(self, effects=tuple(self.effects) + tuple(added))
 
-    def parameters(self) -> dict:
+    def parameters(self) -> dict[str, Any]:
         """The node parameters that reproduce this configuration."""
         n = self.noise
-        values = {'noise_model': n.model, 'dependent_level': float(n.dependent),
-                  'independent_level': float(n.independent),
-                  'dependence_groups': format_groups(n.groups), 'distribution': n.distribution,
-                  'rounding': n.rounding}
+        values: dict[str, Any] = {
+            'noise_model': n.model, 'dependent_level': float(n.dependent),
+            'independent_level': float(n.independent),
+            'dependence_groups': format_groups(n.groups), 'distribution': n.distribution,
+            'rounding': n.rounding}
         values.update({k: float(getattr(self.world, k)) for k in WORLD_KEYS})
         values.update({'steps': self.task.steps, 'perturb_every': self.task.perturb_every,
                        'perturbation_deg': float(self.task.perturbation_deg),
@@ -55,7 +57,7 @@ class SimConfig:
         return values
 
 
-def from_parameters(values: dict, source: str = 'parameters') -> SimConfig:
+def from_parameters(values: Mapping[str, Any], source: str = 'parameters') -> SimConfig:
     """A SimConfig from node parameter values; errors name the file and the key.
 
     Other parameters of the node (mode, rate_hz, robots, ...) are ignored, but a name
@@ -93,7 +95,7 @@ def from_parameters(values: dict, source: str = 'parameters') -> SimConfig:
     return SimConfig(world, noise, task, seed, effects)
 
 
-def load(path=None) -> SimConfig:
+def load(path: StrPath | None = None) -> SimConfig:
     """The configuration in a params YAML; the simulator's defaults for None."""
     if path is None:
         return SimConfig()
@@ -107,7 +109,7 @@ def load(path=None) -> SimConfig:
     return from_parameters(_node_parameters(data, path), str(path))
 
 
-def _node_parameters(data, path: Path) -> dict:
+def _node_parameters(data: object, path: Path) -> dict[str, Any]:
     """The ros__parameters of the file's node sections, merged (a flat mapping is accepted)."""
     if not isinstance(data, dict):
         raise ValueError(f'{path}: expected {{node: {{ros__parameters: {{...}}}}}}, '
@@ -118,13 +120,13 @@ def _node_parameters(data, path: Path) -> dict:
         if any(k in KNOWN for k in data):
             return data
         raise ValueError(f'{path}: no node section with ros__parameters found')
-    merged: dict = {}
+    merged: dict[str, Any] = {}
     for section in sections:
         merged.update(section)
     return merged
 
 
-def dump(config: SimConfig, node: str = '/**', keys=None) -> str:
+def dump(config: SimConfig, node: str = '/**', keys: Iterable[str] | None = None) -> str:
     """Params YAML text for ``node``; ``keys`` limits it to some parameters."""
     values = config.parameters()
     if keys is not None:
@@ -132,6 +134,7 @@ def dump(config: SimConfig, node: str = '/**', keys=None) -> str:
     return yaml.safe_dump({node: {'ros__parameters': values}}, sort_keys=False)
 
 
-def write(config: SimConfig, path, keys=None, header: str = '') -> Path:
+def write(config: SimConfig, path: StrPath, keys: Iterable[str] | None = None,
+          header: str = '') -> Path:
     text = ''.join(f'# {line}\n' for line in header.splitlines()) + dump(config, keys=keys)
     return atomic_write_text(path, text)

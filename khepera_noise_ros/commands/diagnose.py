@@ -7,21 +7,26 @@ conditions for stationary data, the same genome and number of episodes for
 closed-loop data.  Writes OUT/diagnosis.json, OUT/report.md with figures, and,
 when an effect explains the gap, OUT/fitted_params.yaml for the simulator node
 (--ros-args --params-file).  With --transfer-emulator or --transfer-port and a
-closed-loop recording, the transfer experiment is re-run with the fitted effect.
+closed-loop recording, the transfer experiment (docs/transfer.md) evolves controllers in
+the stock simulator, under the paper's two noise models and in the diagnosed simulator
+(and, with --transfer-ceiling, on the robot itself), and tests every best on the robot.
+Do no harm: when the diagnosed simulator's controllers do worse there, its params are
+written as fitted_params.rejected.yaml instead.
 """
 from __future__ import annotations
 
+import dataclasses
+import sys
 from pathlib import Path
 
-import numpy as np
-
-from ..core import evolution
 from ..effects import DEFAULT
 from .. import simconfig
-from ..experiment import transfer
-from ..gap import diagnose, report
-from ..gap.protocol import BASES, condition_world, kind
+from ..experiment import transfer, transfer_report
+from ..experiment import diagnosis_report as report
+from ..gap import diagnose
+from ..gap.protocol import BASES, condition_world
 from ..recording import load
+from . import _transfer
 
 HELP = 'diagnose the sim-to-real gap of recordings; fit the unmodelled effect behind it'
 
@@ -43,15 +48,7 @@ def add_arguments(parser) -> None:
     parser.add_argument('--replicates', type=int, default=200, help='bootstrap replicates')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--no-figures', action='store_true')
-    t = parser.add_argument_group('transfer experiment (closed-loop recordings)')
-    t.add_argument('--transfer-emulator', metavar='EFFECTS_YAML',
-                   help="reality is the emulated robot of this effects file ('real_robot' "
-                        "for the emulator's default)")
-    t.add_argument('--transfer-port', nargs='+', metavar='PORT',
-                   help='reality is the Khepera(s) on these serial ports')
-    t.add_argument('--transfer-trials', type=int, default=5)
-    t.add_argument('--transfer-population', type=int, default=25)
-    t.add_argument('--transfer-generations', type=int, default=50)
+    _transfer.add_arguments(parser)
 
 
 def run(args) -> int:
@@ -64,19 +61,40 @@ def run(args) -> int:
     options = diagnose.Options(config=config, seed=args.seed, base=args.base,
                                held_out=tuple(args.hold_out), replicates=args.replicates,
                                effects=tuple(args.effects))
-    reality = _reality(args, recordings, config)
-    ea = evolution.EAConfig(population=args.transfer_population,
-                            generations=args.transfer_generations)
-    result = diagnose.diagnose(recordings, options)
-    if result.fitted is not None and reality is not None and args.transfer_trials:
-        loop = next(r for r in recordings if kind(r) == 'closed_loop')
-        label = loop.conditions()[0]
-        result.transfer = transfer.run(config, condition_world(loop, label, config.world),
-                                       [result.fitted], reality, args.transfer_trials,
-                                       ea=ea, seed=args.seed)
-        result.transfer['condition'] = label
-    paths = report.write(result, args.out, config, figures=not args.no_figures)
+    if not _transfer.wanted(args):
+        result = diagnose.diagnose(recordings, options)
+        _print(result, report.write(result, args.out, config, figures=not args.no_figures))
+        return 0
+    loop = _transfer.closed_loop(recordings)
+    label = loop.conditions()[0]
+    world = condition_world(loop, label, config.world)
+    with _transfer.robot(args, world, config) as (reality, where):    # a bad port fails now
+        result = diagnose.diagnose(recordings, options)
+        # the diagnosis is on disk before the robot is asked for anything
+        paths = report.write(result, args.out, config, figures=False)
+        if not result.fitted_effects:
+            print('transfer experiment skipped: no effect was fitted', file=sys.stderr)
+            _print(result, report.write(result, args.out, config, figures=not args.no_figures))
+            return 0
+        fitted = simconfig.load(paths['params'])          # the diagnosed simulator, as written
+        simulators = transfer.arms(
+            dataclasses.replace(config, world=world),
+            dataclasses.replace(fitted, world=condition_world(loop, label, fitted.world)))
+        print(f"transfer experiment on {where}: arms {', '.join(simulators)}"
+              f"{', robot_trained' if _transfer.ceiling(args) else ''}", file=sys.stderr)
+        block = {**_transfer.run(args, simulators, reality), 'condition': label,
+                 'robot': where}
+    # gap's report shows the kept keys of a finished comparison; the whole block goes in below
+    result.transfer = block if block['fitness_gap_after'] is not None else None
+    paths = _transfer.do_no_harm(block, report.write(result, args.out, config,
+                                                     figures=not args.no_figures))
+    result.transfer = block
     _print(result, paths)
+    if block['status'] != 'complete':
+        print(f"khepera-noise diagnose: error: {block['error']}; stopped while "
+              f"{block['stopped_at']}; {block['done']}; partial results in "
+              f"{paths['diagnosis']}", file=sys.stderr)
+        return 130 if block['error'] == 'interrupted' else 1
     return 0
 
 
@@ -101,55 +119,7 @@ def _print(result: diagnose.Diagnosis, paths: dict) -> None:
               f"{rem['heldout_reduction_named']:.2f}, with the empirical model "
               f"{rem['heldout_reduction_with_empirical']:.2f}")
     if result.transfer:
-        t = result.transfer
-        print(f"  transfer: fitness gap {t['fitness_gap_before']:.3f} -> "
-              f"{t['fitness_gap_after']:.3f} (Welch p = {t['gap_p']})")
+        for line in transfer_report.lines(result.transfer):
+            print(line)
     for what, path in paths.items():
         print(f'wrote {what}: {path}')
-
-
-def _reality(args, recordings, config):
-    """The black box the transfer experiment tests in, or None."""
-    if not (args.transfer_emulator or args.transfer_port):
-        return None
-    if args.transfer_emulator and args.transfer_port:
-        raise ValueError('choose one of --transfer-emulator and --transfer-port')
-    loops = [r for r in recordings if kind(r) == 'closed_loop']
-    if not loops:
-        raise ValueError('the transfer experiment needs a closed-loop recording')
-    world = condition_world(loops[0], loops[0].conditions()[0], config.world)
-    if args.transfer_port:
-        return port_reality(args.transfer_port, world, config)
-    return emulator_reality(args.transfer_emulator, world, config, args.seed)
-
-
-def emulator_reality(effects: str, world, config: simconfig.SimConfig, seed: int):
-    """(genomes, seeds) -> fitness on emulated robots, one per genome."""
-    from ..reality.effects import EffectsConfig
-    from ..reality.khepera_robot import InProcessRobots, KheperaRobots
-    from ..reality.world import EmulatedWorld
-    physics = EffectsConfig.real_robot() if effects == 'real_robot' \
-        else EffectsConfig.load(effects)
-
-    def evaluate(genomes, seeds):
-        env = KheperaRobots(InProcessRobots(EmulatedWorld(physics, seed, len(seeds))), world,
-                            config.task)
-        try:
-            return transfer.fitness(env, genomes, seeds)
-        finally:
-            env.close()
-    return evaluate
-
-
-def port_reality(ports, world, config: simconfig.SimConfig):
-    """(genomes, seeds) -> fitness on Kheperas on serial ports, as many at a time as ports."""
-    from ..reality.khepera_robot import KheperaRobots
-    env = KheperaRobots.on_ports(list(ports), world, config.task)
-
-    def evaluate(genomes, seeds):
-        out = []
-        for lo in range(0, len(seeds), len(ports)):
-            out.append(transfer.fitness(env, genomes[lo:lo + len(ports)],
-                                        seeds[lo:lo + len(ports)]))
-        return np.concatenate(out)
-    return evaluate

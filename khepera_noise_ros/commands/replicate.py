@@ -22,9 +22,9 @@ from pathlib import Path
 
 from .. import lifeline
 from ..experiment import config as settings
-from ..experiment import report, stats_report
+from ..experiment import diagnosed, report, stats_report
 from ..experiment.protocol import Backends, ConditionEpisodes, Experiment, batch_simulate, \
-    chunked, chunked_trace, core_simulate, play
+    chunked, chunked_trace, play
 from ..experiment.store import Store
 from ..reality.emulator import EmulatorProcess
 from ..reality.khepera_robot import InProcessRobots, KheperaRobots
@@ -58,6 +58,10 @@ def add_arguments(parser) -> None:
                              'bests with the full budget (settings key ceiling), to show how '
                              'much of the drop real training can recover; resumes a run '
                              'without it')
+    parser.add_argument('--params', type=Path, metavar='FITTED_PARAMS',
+                        help="a fitted_params.yaml (khepera-noise diagnose): its simulator "
+                             "becomes a condition 'diagnosed' beside the paper's models "
+                             '(settings key diagnosed)')
     parser.add_argument('--trials', type=int, help='trials per condition (overrides the config)')
     parser.add_argument('--seed', type=int, help="the run's seed (overrides the config)")
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
@@ -70,6 +74,8 @@ def run(args) -> int:
     overrides['backend'] = backend_choice(args.backend, args.port)
     if getattr(args, 'ceiling', False):
         overrides['ceiling'] = {'enabled': True}
+    if getattr(args, 'params', None) is not None:
+        overrides['diagnosed'] = str(args.params)
     config = settings.load(args.config, quick=args.quick, overrides=overrides,
                            protocol=getattr(args, 'protocol', None))
     out = args.out or default_out(args.quick, getattr(args, 'protocol', None))
@@ -218,16 +224,24 @@ def open_backends(config: settings.ReplicateConfig, ports=None):
 
 
 def _simulation(config: settings.ReplicateConfig, ros) -> tuple:
-    """(simulate, description): all conditions in one batch, through the graph or not."""
-    noise = {c.key: c.noise for c in config.conditions}
+    """(simulate, description): the paper's conditions in one batch, through the graph or
+    not; the diagnosed condition (its effects) on a simulator of its own."""
+    own = [c for c in config.conditions if c.effects]
     if config.backend['simulation'] == 'core':
-        return (core_simulate(noise, config.world, config.task),
-                'the core simulator in process, all conditions in one batch')
+        return (diagnosed.core(config), 'the core simulator in process, all conditions in '
+                'one batch' + (' (the diagnosed condition in a batch of its own)' if own
+                               else ''))
+    noise = {c.key: c.noise for c in config.conditions if not c.effects}
     episodes = ConditionEpisodes(noise, config.world, config.task)
-    return (batch_simulate(ros.simulator(config, episodes), episodes),
-            "the node graph: a robot node over the core simulator, each condition's noise "
-            'model on its own robots of one batch, a controller node, and the fitness the '
-            'robot node scores from its lockstep light and cmd_turn topics')
+    simulate = diagnosed.combine(
+        batch_simulate(ros.simulator(config, episodes), episodes),
+        {c.key: ros.simulator(config, diagnosed.episodes(c, config.world, config.task),
+                              name=f'simulation_{c.key}') for c in own})
+    return (simulate, "the node graph: a robot node over the core simulator, each condition's "
+            'noise model on its own robots of one batch, a controller node, and the fitness '
+            'the robot node scores from its lockstep light and cmd_turn topics'
+            + ('; the diagnosed condition on a robot node of its own over the simulator with '
+               'its effects' if own else ''))
 
 
 def _reality(config: settings.ReplicateConfig, ros, ports) -> tuple:
@@ -307,11 +321,12 @@ class _Ros:
         evaluator.wait_ready(timeout_s=30.0)
         return evaluator
 
-    def simulator(self, config: settings.ReplicateConfig, episodes: ConditionEpisodes):
+    def simulator(self, config: settings.ReplicateConfig, episodes,
+                  name: str = 'simulation'):
         """A robot node over ``episodes``, a controller, and their evaluator."""
         from ..nodes.params import overrides
         from ..nodes.robot_node import RobotNode
-        namespace = f'{self.prefix}/simulation'
+        namespace = f'{self.prefix}/{name}'
         geometry = {k: v for k, v in config.data['world'].items() if k != 'deg_per_power'}
         values = {**config.data['task'], **geometry}
         self._add(RobotNode('simulator', backend=episodes, context=self.context,

@@ -21,9 +21,8 @@ import yaml
 
 from .. import lifeline
 from ..experiment import config as settings
-from ..experiment import sweep
-from ..experiment.protocol import Backends, Experiment, chunked, chunked_trace, \
-    core_simulate, play
+from ..experiment import diagnosed, sweep
+from ..experiment.protocol import Backends, Experiment, chunked, chunked_trace, play
 from ..experiment.store import Store
 from ..reality.khepera_robot import InProcessRobots, KheperaRobots
 from ..reality.world import EmulatedWorld
@@ -55,6 +54,15 @@ def add_arguments(parser) -> None:
                         f"{', '.join(sweep.GROUPINGS)} (default front)")
     parser.add_argument('--no-control', action='store_true',
                         help='leave out the control point (reality = the simulator)')
+    parser.add_argument('--params', type=Path, metavar='FITTED_PARAMS',
+                        help="a fitted_params.yaml (khepera-noise diagnose): its simulator "
+                             "becomes a condition 'diagnosed' beside the paper's models")
+    parser.add_argument('--port', action='append', metavar='DEV',
+                        help='add a point whose reality is the robot on these serial ports '
+                             '(repeatable, one robot per port; e.g. a foreign robot served '
+                             'by benchmark/foreign_robots.py serve)')
+    parser.add_argument('--no-emulated', action='store_true',
+                        help='leave out the emulated realities (with --port: the robot only)')
     parser.add_argument('--trials', type=int, help='trials per condition (default 50)')
     parser.add_argument('--ceiling', action='store_true',
                         help='also run the ceiling arm at every point: phase 2 again with the '
@@ -93,8 +101,14 @@ def run(args) -> int:
         overrides['seed'] = args.seed
     if getattr(args, 'ceiling', False):
         overrides['ceiling'] = {'enabled': True}
+    if getattr(args, 'params', None) is not None:
+        overrides['diagnosed'] = str(args.params)
     base = settings.load(args.config, overrides=overrides, protocol=args.protocol)
-    pts = sweep.points(spec)
+    ports = tuple(getattr(args, 'port', None) or ())
+    pts = ([] if getattr(args, 'no_emulated', False) else sweep.points(spec)) + \
+        ([sweep.Point(None, None, None, ports)] if ports else [])
+    if not pts:
+        raise ValueError('--no-emulated leaves no reality: add --port DEV')
     args.out.mkdir(parents=True, exist_ok=True)
     started, results = time.monotonic(), []
     with lifeline.terminate_as_interrupt():
@@ -119,6 +133,7 @@ def run(args) -> int:
                      'elapsed_s': elapsed})
     write(args.out, analysis)
     print(sweep.table(analysis), end='')
+    print(sweep.diagnosed_table(analysis, 3), end='')
     print(f"wrote {args.out / 'sweep.md'} ({elapsed:.0f} s this session)")
     return 0
 
@@ -135,9 +150,14 @@ def share_simulation(source: Store, store: Store, config) -> None:
 
 
 def backends(config, point: sweep.Point) -> Backends:
-    noise = {c.key: c.noise for c in config.conditions}
-    simulate = core_simulate(noise, config.world, config.task)
+    simulate = diagnosed.core(config)
     capacity = config.reality['robots']
+    if point.ports:
+        robots = KheperaRobots.on_ports(list(point.ports), config.world, config.task)
+        n = len(point.ports)
+        return Backends(simulate, chunked(lambda g, s: play(robots, g, s)[0], n),
+                        chunked_trace(lambda g, s: play(robots, g, s)[1], n),
+                        {'reality': point.label})
     if point.shared is None:
         control = sweep.control_reality(config)
         return Backends(simulate, chunked(control, capacity),
@@ -150,6 +170,15 @@ def backends(config, point: sweep.Point) -> Backends:
     return Backends(simulate, chunked(lambda g, s: play(robots, g, s)[0], capacity),
                     chunked_trace(lambda g, s: play(robots, g, s)[1], capacity),
                     {'reality': point.label})
+
+
+def _diagnosed_md(analysis: dict) -> list[str]:
+    table = sweep.diagnosed_table(analysis, 3)
+    if not table:
+        return []
+    return ['## Does the diagnosed simulator transfer better? Diagnosed - each paper '
+            "condition, Welch's 95% CI", '', 'Step 3 (first real test):', '', table,
+            'Step 5 (after real training):', '', sweep.diagnosed_table(analysis, 5)]
 
 
 def write(out: Path, analysis: dict) -> None:
@@ -168,7 +197,8 @@ def write(out: Path, analysis: dict) -> None:
             'Paired by trial (the same controllers on the same test episodes); the ceiling '
             'arm (`--ceiling`) is phase 2 again with the full budget. Where even the ceiling '
             'recovers nothing, no noise model can transfer better at step 5.', '',
-            sweep.recovery_table(analysis), '## Settings', '', '```yaml',
+            sweep.recovery_table(analysis), *_diagnosed_md(analysis), '## Settings', '',
+            '```yaml',
             yaml.safe_dump(analysis['settings'], sort_keys=False).rstrip(), '```', '']
     (out / 'sweep.md').write_text('\n'.join(text))
     (out / 'sweep.json').write_text(json.dumps(analysis, indent=1, default=str))

@@ -7,10 +7,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from . import network, task
 from .khepera import World
 from .noise import NoiseModel
+from .task import Trace
 
 
 @dataclass
@@ -26,7 +28,7 @@ class CoreEvaluator:
     noise: NoiseModel = field(default_factory=NoiseModel)
     task: task.Task = field(default_factory=task.Task)
 
-    def __call__(self, genomes, seeds) -> np.ndarray:
+    def __call__(self, genomes: npt.ArrayLike, seeds: npt.ArrayLike) -> np.ndarray:
         """Score one episode per genome.
 
         Args:
@@ -40,7 +42,7 @@ class CoreEvaluator:
         return task.run(lambda r: network.act(weights, r), np.asarray(seeds, np.int64),
                         world=self.world, noise=self.noise, task=self.task).astype(np.float64)
 
-    def trace(self, genomes, seeds) -> task.Trace:
+    def trace(self, genomes: npt.ArrayLike, seeds: npt.ArrayLike) -> Trace:
         """The per-step record of the episodes ``__call__`` scores.
 
         Args:

@@ -7,9 +7,11 @@ their fitness; many EAs can be evaluated as one batch without changing any resul
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterator
 
 import numpy as np
+import numpy.typing as npt
 
 from .network import GENES, check_genomes
 
@@ -42,7 +44,7 @@ class EAConfig:
     best: str = 'ever'
     retest_episodes: int = 5
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.population, (int, np.integer)) or self.population < 2:
             raise ValueError(f'population must be an integer >= 2, got {self.population!r}')
         if not isinstance(self.generations, (int, np.integer)) or self.generations < 0:
@@ -79,11 +81,22 @@ class _Tournament:
 
     generation: int
     pair: tuple[int, int]
-    noise: np.ndarray            # the mutation, added to the winner's genes
+    noise: np.ndarray | None     # the mutation, added to the winner's genes
     seeds: np.ndarray            # episode seeds: the mutant's, or both members'
     state: str = 'waiting'       # waiting -> evaluating -> done
-    results: dict | None = None  # member -> fitness told for this tournament
+    results: dict[int, float] = field(default_factory=dict)   # member -> fitness told
     mutant: int | None = None    # the member replaced (the loser)
+    genomes: dict[int, np.ndarray] | None = None   # members' genomes when it finished
+
+
+# What ask() hands out: genomes, seeds, and who each evaluation is for.
+_Batch = tuple[np.ndarray, np.ndarray, list[Any]]
+
+
+def _pair(rng: np.random.Generator, population: int) -> tuple[int, int]:
+    """Two distinct members drawn at random."""
+    i, j = (int(m) for m in rng.choice(population, 2, replace=False))
+    return i, j
 
 
 class SteadyStateEA:
@@ -96,7 +109,8 @@ class SteadyStateEA:
     front.)  A population of 25 needs about a fifth of the sequential rounds.
     """
 
-    def __init__(self, config: EAConfig = PHASE1, seed: int = 0, seed_genome=None):
+    def __init__(self, config: EAConfig = PHASE1, seed: int = 0,
+                 seed_genome: npt.ArrayLike | None = None):
         """Args:
             config: the EA's settings.
             seed: of every random draw of the run (members, pairs, mutations, seeds).
@@ -115,7 +129,7 @@ class SteadyStateEA:
         per = 2 if cfg.fitness == 'reevaluate' else 1
         self._initial_seeds = self._seeds(cfg.population)
         self._tournaments = [
-            _Tournament(g, tuple(int(m) for m in rng.choice(cfg.population, 2, replace=False)),
+            _Tournament(g, _pair(rng, cfg.population),
                         rng.uniform(-cfg.mutation_range, cfg.mutation_range, GENES),
                         self._seeds(per))
             for g in range(1, cfg.generations + 1) for _ in range(cfg.population)]
@@ -129,7 +143,7 @@ class SteadyStateEA:
         self.generation = 0
         self._committed = 0               # tournaments folded into the sequential record
         self._seq_fitness = self.fitness.copy()
-        self._asked: list | None = None   # (genomes, seeds, [(tournament or tag, member)])
+        self._asked: _Batch | None = None   # (genomes, seeds, [(tournament or tag, member)])
         self._stage = 'initial'
 
     def _seeds(self, n: int) -> np.ndarray:
@@ -151,7 +165,7 @@ class SteadyStateEA:
         genomes, seeds, _ = self._asked
         return genomes.copy(), seeds.copy()
 
-    def tell(self, fitness) -> None:
+    def tell(self, fitness: npt.ArrayLike) -> None:
         """Take the fitness of what ``ask()`` gave.
 
         Args:
@@ -188,15 +202,18 @@ class SteadyStateEA:
 
     # --- scheduling: which evaluations can run now ------------------------------------
 
-    def _next_batch(self):
+    def _next_batch(self) -> _Batch:
         if self._stage == 'initial':
-            owners = [('initial', m) for m in range(self.config.population)]
+            owners: list[Any] = [('initial', m) for m in range(self.config.population)]
             return self.population.copy(), self._initial_seeds, owners
         if self._stage == 'retest':
             k = self.config.retest_episodes
+            assert self._retest_seeds is not None           # drawn when best='retest'
             return np.repeat(self.population, k, axis=0), self._retest_seeds, [None] * len(
                 self._retest_seeds)
-        genomes, seeds, owners = [], [], []
+        genomes: list[np.ndarray] = []
+        seeds: list[int] = []
+        owners = []
         blocked = {m for t in self._tournaments[self._committed:] if t.state == 'evaluating'
                    for m in self._reserved(t)}
         for t in self._tournaments[self._committed:]:
@@ -214,12 +231,12 @@ class SteadyStateEA:
             blocked.update(self._reserved(t))
         return np.array(genomes), np.array(seeds, dtype=np.int64), owners
 
-    def _reserved(self, t: _Tournament) -> tuple:
+    def _reserved(self, t: _Tournament) -> tuple[int | None, ...]:
         """Members a started tournament still holds: both while they are re-evaluated;
         only the loser while the mutant that replaced it awaits its fitness."""
         return t.pair if self.config.fitness == 'reevaluate' else (t.mutant,)
 
-    def _start(self, t: _Tournament):
+    def _start(self, t: _Tournament) -> Iterator[tuple[int, np.ndarray, int]]:
         """Begin a tournament whose members are settled; yield what it needs evaluated."""
         t.state, t.results = 'evaluating', {}
         i, j = t.pair
@@ -227,15 +244,18 @@ class SteadyStateEA:
             yield i, self.population[i].copy(), t.seeds[0]
             yield j, self.population[j].copy(), t.seeds[1]
             return
-        self._replace_loser(t, self.fitness[i], self.fitness[j])
-        yield t.mutant, self.population[t.mutant].copy(), t.seeds[0]
+        loser = self._replace_loser(t, self.fitness[i], self.fitness[j])
+        yield loser, self.population[loser].copy(), t.seeds[0]
 
-    def _replace_loser(self, t: _Tournament, fi: float, fj: float) -> None:
+    def _replace_loser(self, t: _Tournament, fi: float, fj: float) -> int:
+        """Replace the loser by the winner's mutant; the loser."""
         i, j = t.pair
         winner, loser = (i, j) if fi >= fj else (j, i)
+        assert t.noise is not None                      # freed only once committed
         self.population[loser] = self.population[winner] + t.noise
         self.fitness[loser] = -np.inf
         t.mutant = loser
+        return loser
 
     def _finish(self, t: _Tournament) -> None:
         if self.config.fitness == 'reevaluate':
@@ -244,6 +264,7 @@ class SteadyStateEA:
             t.genomes = {m: self.population[m].copy() for m in t.pair}
             self._replace_loser(t, t.results[i], t.results[j])
         else:
+            assert t.mutant is not None                     # set when it started
             self.fitness[t.mutant] = t.results[t.mutant]
             t.genomes = {t.mutant: self.population[t.mutant].copy()}
         t.state = 'done'
@@ -257,6 +278,7 @@ class SteadyStateEA:
             t = self._tournaments[self._committed]
             self.generation = t.generation
             members = list(t.results)
+            assert t.genomes is not None and t.mutant is not None   # set when it finished
             self._note_best(np.array([t.genomes[m] for m in members]),
                             np.array([t.results[m] for m in members]))
             for m in members:
@@ -300,7 +322,8 @@ class SteadyStateEA:
         self._stage = 'done'
 
 
-def evolve(eas: list[SteadyStateEA], evaluate, progress=None) -> None:
+def evolve(eas: list[SteadyStateEA], evaluate: Callable[[np.ndarray, np.ndarray], np.ndarray],
+           progress: Callable[[list[SteadyStateEA]], object] | None = None) -> None:
     """Drive several EAs to the end, evaluating all their requests as one batch.
 
     Args:

@@ -16,6 +16,7 @@ average of its readings: the noiseless base is not known.  Clipping at 0 and
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from .khepera import DARK, SENSORS
 from .noise import NoiseModel
@@ -23,12 +24,12 @@ from .noise import NoiseModel
 QUANTISATION = 1.0 / 12.0       # variance of rounding to a whole count
 
 
-def illuminance(readings, lux_per_count: float = 1.0) -> np.ndarray:
+def illuminance(readings: npt.ArrayLike, lux_per_count: float = 1.0) -> np.ndarray:
     """Readings (counts, 0 brightest) to illuminance, brighter is larger."""
     return lux_per_count * (DARK - np.asarray(readings, np.float64))
 
 
-def draw_variance(half_width, distribution: str) -> np.ndarray:
+def draw_variance(half_width: npt.ArrayLike, distribution: str) -> np.ndarray:
     """Variance of ``getnoise``: a draw of half-width a = p v (uniform on +-a, or normal
     of the same spread) truncated toward zero.  Exact for the uniform draw; for the
     normal one sigma^2 - E|x| + 1/6, exact in the limit of a large sigma."""
@@ -43,7 +44,7 @@ def draw_variance(half_width, distribution: str) -> np.ndarray:
                     0.0)
 
 
-def reading_variance(readings, noise: NoiseModel) -> np.ndarray:
+def reading_variance(readings: npt.ArrayLike, noise: NoiseModel) -> np.ndarray:
     """(SENSORS,) variance in counts^2 of the eight readings of one robot."""
     v = np.asarray(readings, np.float64).reshape(SENSORS)
     dependent, independent = noise.levels
@@ -56,7 +57,7 @@ def reading_variance(readings, noise: NoiseModel) -> np.ndarray:
     return variance
 
 
-def illuminance_variance(readings, noise: NoiseModel | None,
+def illuminance_variance(readings: npt.ArrayLike, noise: NoiseModel | None,
                          lux_per_count: float = 1.0) -> np.ndarray:
     """(SENSORS,) variance of ``illuminance``; zeros (unknown) without a noise model."""
     if noise is None:

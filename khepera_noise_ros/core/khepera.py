@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+import numpy.typing as npt
 
 SENSORS = 8
 FRONT = 6                    # s0..s5 face forward; the task uses only these
@@ -37,7 +38,7 @@ class World:
     floor: float = 50.0
     deg_per_power: float = 3.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_range('lamp_distance_mm', self.lamp_distance_mm, 0.0, 1e4)
         _check_range('ambient', self.ambient, 0.0, DARK)
         _check_range('floor', self.floor, 0.0, DARK)
@@ -89,7 +90,7 @@ def _check_range(name: str, value: float, low: float, high: float) -> None:
         raise ValueError(f'{name} must be a finite number in [{low}, {high}], got {value!r}')
 
 
-def to_tenths(bearing_deg) -> np.ndarray:
+def to_tenths(bearing_deg: npt.ArrayLike) -> np.ndarray:
     """Bearings to grid indices.
 
     Args:
@@ -130,7 +131,7 @@ def turn(tenths: np.ndarray, direction: np.ndarray, power: np.ndarray,
     Returns:
         (B,) new grid indices, unwrapped.
     """
-    step = direction * power
+    step: np.ndarray = direction * power
     step *= world.tenths_per_power
     step += tenths
     return step

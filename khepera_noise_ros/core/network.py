@@ -10,9 +10,10 @@ gives the power trunc(10 * out), at most 9.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from .khepera import DARK, FRONT, SENSORS
 
@@ -30,15 +31,17 @@ class Weights:
     w_ho: np.ndarray   # (HIDDEN, OUTPUTS, B)
     b_h: np.ndarray    # (HIDDEN, B)
     b_o: np.ndarray    # (OUTPUTS, B)
+    _w_reading: np.ndarray = field(init=False, repr=False, compare=False)
+    _b_reading: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # sum_i (1 - s_i/525) w_ij + b_j = sum_i s_i (-w_ij/525) + (b_j + sum_i w_ij):
         # folding the input scaling into the weights saves two passes per step.
         object.__setattr__(self, '_w_reading', self.w_ih * np.float32(-1.0 / DARK))
         object.__setattr__(self, '_b_reading', self.b_h + self.w_ih.sum(axis=0))
 
 
-def check_genomes(genomes) -> np.ndarray:
+def check_genomes(genomes: npt.ArrayLike) -> np.ndarray:
     """Checked genomes.
 
     Args:
@@ -63,7 +66,7 @@ def check_genomes(genomes) -> np.ndarray:
     return g
 
 
-def unpack(genomes) -> Weights:
+def unpack(genomes: npt.ArrayLike) -> Weights:
     """The networks of (B, 20) genomes (checked), in float32, robot index last."""
     g = check_genomes(genomes).astype(np.float32).T          # (20, B)
     n_ih = INPUTS * HIDDEN
@@ -78,7 +81,9 @@ def unpack(genomes) -> Weights:
 def pack(w: Weights) -> np.ndarray:
     """The inverse of ``unpack``: (B, 20) genomes."""
     b = w.b_o.shape[-1]
-    return np.concatenate([w.w_ih.reshape(-1, b), w.w_ho.reshape(-1, b), w.b_h, w.b_o]).T
+    genomes: np.ndarray = np.concatenate([w.w_ih.reshape(-1, b), w.w_ho.reshape(-1, b), w.b_h,
+                                          w.b_o]).T
+    return genomes
 
 
 def inputs(readings: np.ndarray) -> np.ndarray:
@@ -90,7 +95,8 @@ def inputs(readings: np.ndarray) -> np.ndarray:
     Returns:
         (B, FRONT) inputs.
     """
-    return 1.0 - readings[:, :FRONT] * np.float32(1.0 / DARK)
+    x: np.ndarray = 1.0 - readings[:, :FRONT] * np.float32(1.0 / DARK)
+    return x
 
 
 def _logistic(z: np.ndarray) -> np.ndarray:
@@ -98,7 +104,8 @@ def _logistic(z: np.ndarray) -> np.ndarray:
     with np.errstate(over='ignore'):
         np.exp(np.negative(z, out=z), out=z)
     z += 1
-    return np.divide(1, z, out=z)           # the same quotient; numpy vectorises divide only
+    out: np.ndarray = np.divide(1, z, out=z)    # the same quotient; numpy vectorises divide only
+    return out
 
 
 def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
@@ -111,7 +118,8 @@ def outputs(w: Weights, readings: np.ndarray) -> np.ndarray:
     Returns:
         (B, OUTPUTS) activations in (0, 1).
     """
-    return _logistic(_output_net(w, readings)).T
+    activations: np.ndarray = _logistic(_output_net(w, readings)).T
+    return activations
 
 
 def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
@@ -121,7 +129,7 @@ def _output_net(w: Weights, readings: np.ndarray) -> np.ndarray:
                          f'got shape {readings.shape}')
     hidden = np.einsum('bi,ijb->jb', readings[:, :FRONT], w._w_reading)
     hidden += w._b_reading
-    net = np.einsum('jb,jkb->kb', _logistic(hidden), w.w_ho)
+    net: np.ndarray = np.einsum('jb,jkb->kb', _logistic(hidden), w.w_ho)
     net += w.b_o
     return net
 

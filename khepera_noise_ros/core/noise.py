@@ -18,8 +18,10 @@ the unrounded light level, rounded and clipped once, as a converter does).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Iterable, SupportsInt
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import ndtri
 
 from .khepera import DARK, SENSORS
@@ -30,16 +32,19 @@ DISTRIBUTIONS = ('uniform', 'normal')
 ROUNDINGS = ('level', 'reading')
 DEFAULT_GROUPS = ((0, 1, 2, 3, 4, 5), (6, 7))
 _SQRT3 = np.float32(np.sqrt(3.0))
+Groups = tuple[tuple[int, ...], ...]     # dependence groups: sensor indices
 
 
-def getnoise(v, p, u) -> np.ndarray:
+def getnoise(v: npt.ArrayLike, p: float, u: np.ndarray | float) -> np.ndarray:
     """The paper's getnoise: ``(int)(2*p*v*realrand() - p*v)`` for draws u in [0, 1]."""
-    return np.trunc(2.0 * p * np.asarray(v) * u - p * np.asarray(v))
+    noise: np.ndarray = np.trunc(2.0 * p * np.asarray(v) * u - p * np.asarray(v))
+    return noise
 
 
 def realrand(draws: np.ndarray) -> np.ndarray:
     """16-bit draws to reals in [0, 1] inclusive, like the paper's realrand()."""
-    return draws.astype(np.float32) * np.float32(1.0 / UNIT)
+    reals: np.ndarray = draws.astype(np.float32) * np.float32(1.0 / UNIT)
+    return reals
 
 
 def gaussian(draws: np.ndarray) -> np.ndarray:
@@ -60,11 +65,11 @@ class NoiseModel:
     model: str = 'combination'
     dependent: float = 0.03
     independent: float = 0.02
-    groups: tuple = field(default=DEFAULT_GROUPS)
+    groups: Groups = field(default=DEFAULT_GROUPS)
     distribution: str = 'uniform'
     rounding: str = 'level'
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.model not in MODELS:
             raise ValueError(f'noise model must be one of {MODELS}, got {self.model!r}')
         if self.distribution not in DISTRIBUTIONS:
@@ -81,7 +86,7 @@ class NoiseModel:
         object.__setattr__(self, 'groups', check_groups(self.groups))
 
     @classmethod
-    def independent_only(cls, level: float, **kw) -> 'NoiseModel':
+    def independent_only(cls, level: float, **kw: Any) -> 'NoiseModel':
         """The independent model at ``level``."""
         return cls(model='independent', dependent=0.0, independent=level, **kw)
 
@@ -148,7 +153,8 @@ class NoiseModel:
         x *= v
         return x if self.rounding == 'reading' else np.trunc(x, out=x)
 
-    def sample(self, base, rng: np.random.Generator, samples: int = 1) -> np.ndarray:
+    def sample(self, base: npt.ArrayLike, rng: np.random.Generator,
+               samples: int = 1) -> np.ndarray:
         """Readings of fixed base values, for plots and checks.
 
         Args:
@@ -166,10 +172,11 @@ class NoiseModel:
         grid = np.repeat(base[:, None], samples, axis=1)
         draws = rng.integers(0, int(UNIT) + 1, size=(base.size + len(self.groups), samples),
                              dtype=np.uint16)
-        return self.apply(grid, draws[:base.size], draws[base.size:]).T
+        readings: np.ndarray = self.apply(grid, draws[:base.size], draws[base.size:]).T
+        return readings
 
 
-def check_groups(groups) -> tuple:
+def check_groups(groups: Iterable[Iterable[SupportsInt]]) -> Groups:
     """Checked dependence groups.
 
     Args:
@@ -182,13 +189,13 @@ def check_groups(groups) -> tuple:
         ValueError: a group empty, naming a sensor outside 0..7, or overlapping another.
     """
     try:
-        groups = tuple(tuple(int(s) for s in g) for g in groups)
+        checked: Groups = tuple(tuple(int(s) for s in g) for g in groups)
     except (TypeError, ValueError):
         raise ValueError(f'dependence groups must be lists of sensor indices, got {groups!r}')
     seen: set[int] = set()
-    for g in groups:
+    for g in checked:
         if not g:
-            raise ValueError(f'dependence groups must not be empty, got {groups!r}')
+            raise ValueError(f'dependence groups must not be empty, got {checked!r}')
         bad = [s for s in g if not 0 <= s < SENSORS]
         if bad:
             raise ValueError(f'dependence group {list(g)} names sensors {bad}; '
@@ -196,14 +203,14 @@ def check_groups(groups) -> tuple:
         overlap = seen.intersection(g)
         if overlap or len(set(g)) != len(g):
             raise ValueError(f'dependence groups must not overlap: sensor(s) '
-                             f'{sorted(overlap) or list(g)} appear twice in {groups!r}')
+                             f'{sorted(overlap) or list(g)} appear twice in {checked!r}')
         seen.update(g)
-    if len(groups) > SENSORS:
-        raise ValueError(f'at most {SENSORS} dependence groups, got {len(groups)}')
-    return groups
+    if len(checked) > SENSORS:
+        raise ValueError(f'at most {SENSORS} dependence groups, got {len(checked)}')
+    return checked
 
 
-def group_averages(base: np.ndarray, groups: tuple) -> np.ndarray:
+def group_averages(base: np.ndarray, groups: Groups) -> np.ndarray:
     """(len(groups), ...) float32 average of each group's rows of ``base`` (SENSORS, ...)."""
     out = np.empty((len(groups),) + base.shape[1:], np.result_type(base.dtype, np.float32))
     for g, members in enumerate(_indexers(groups)):
@@ -212,13 +219,13 @@ def group_averages(base: np.ndarray, groups: tuple) -> np.ndarray:
     return out
 
 
-def _indexers(groups: tuple) -> list:
+def _indexers(groups: Groups) -> list[slice | list[int]]:
     """A slice for each run of adjacent sensors (cheap), else an index list."""
     return [slice(g[0], g[-1] + 1) if list(g) == list(range(g[0], g[-1] + 1)) else list(g)
             for g in groups]
 
 
-def parse_groups(text: str) -> tuple:
+def parse_groups(text: str) -> Groups:
     """'0,1,2;3,4,5' -> ((0, 1, 2), (3, 4, 5)); the empty string means no groups."""
     try:
         groups = [[int(s) for s in g.split(',')] for g in text.split(';') if g.strip()]
@@ -228,6 +235,6 @@ def parse_groups(text: str) -> tuple:
     return check_groups(groups)
 
 
-def format_groups(groups) -> str:
+def format_groups(groups: Iterable[Iterable[int]]) -> str:
     """((0, 1, 2), (3, 4, 5)) -> '0,1,2;3,4,5', as ``parse_groups`` reads it."""
     return ';'.join(','.join(str(s) for s in g) for g in groups)

@@ -11,7 +11,10 @@ runtime parameter change does not shift later draws).  Two sources:
 """
 from __future__ import annotations
 
+from typing import SupportsInt, Union, cast
+
 import numpy as np
+import numpy.typing as npt
 
 PERTURB = 0                 # channel of the heading perturbation
 SENSOR = slice(1, 9)        # independent noise, one per sensor
@@ -59,7 +62,7 @@ class BatchStream:
 class RobotStreams:
     """One counter-based stream per robot, addressed by (step, channel)."""
 
-    def __init__(self, seeds):
+    def __init__(self, seeds: npt.ArrayLike) -> None:
         seeds = np.asarray(seeds)
         if seeds.ndim != 1 or seeds.size == 0:
             raise ValueError(f'seeds must be a non-empty 1-D sequence, got shape {seeds.shape}')
@@ -75,10 +78,14 @@ class RobotStreams:
         counter = np.uint64(step) * np.uint64(CHANNELS // 4) + self._channel + np.uint64(1)
         words = _splitmix(self._keys[None, :] + counter * _GOLDEN)
         # each 64-bit word gives four 16-bit draws, for four consecutive channels
-        return words.T.copy().view(np.uint16).reshape(self.robots, CHANNELS).T
+        draws: np.ndarray = words.T.copy().view(np.uint16).reshape(self.robots, CHANNELS).T
+        return draws
 
 
-def make_stream(seed, robots: int):
+Stream = Union[BatchStream, RobotStreams]
+
+
+def make_stream(seed: npt.ArrayLike, robots: int) -> Stream:
     """The random stream of a batch of episodes.
 
     Args:
@@ -93,7 +100,7 @@ def make_stream(seed, robots: int):
         ValueError: as many seeds as robots are not given.
     """
     if np.ndim(seed) == 0:
-        return BatchStream(int(seed), robots)
+        return BatchStream(int(cast(SupportsInt, seed)), robots)
     streams = RobotStreams(seed)
     if streams.robots != robots:
         raise ValueError(f'got {streams.robots} seeds for {robots} robots')

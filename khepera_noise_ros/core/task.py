@@ -9,9 +9,10 @@ episode's fitness is the mean over its steps.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Literal, overload
 
 import numpy as np
+import numpy.typing as npt
 
 from . import streams
 from .khepera import DARK, TENTHS, World, to_degrees, to_tenths, turn
@@ -38,7 +39,7 @@ class Task:
     perturb_every: int = 5
     perturbation_deg: float = 25.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, low in (('steps', 1), ('perturb_every', 1)):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < low:
@@ -68,7 +69,8 @@ def knock_deg(perturb_draws: np.ndarray, task: Task) -> np.ndarray:
     return to_degrees(knock_tenths(perturb_draws, task))
 
 
-def fitness_factors(readings: np.ndarray, power: np.ndarray):
+def fitness_factors(readings: np.ndarray, power: npt.ArrayLike
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The paper's three factors of a step's fitness.
 
     Args:
@@ -96,7 +98,7 @@ def fitness_factors(readings: np.ndarray, power: np.ndarray):
     return balance, intensity, turning
 
 
-def step_fitness(readings: np.ndarray, power: np.ndarray) -> np.ndarray:
+def step_fitness(readings: np.ndarray, power: npt.ArrayLike) -> np.ndarray:
     """balance x intensity x turning of one step.
 
     Args:
@@ -121,7 +123,7 @@ class Episodes:
     """
 
     def __init__(self, world: World = World(), noise: NoiseModel = NoiseModel(),
-                 task: Task = Task()):
+                 task: Task = Task()) -> None:
         self.task = task
         self.noise = noise
         self.world = world
@@ -137,7 +139,8 @@ class Episodes:
         self._world = world
         # bearing-major: a robot's 8 readings are one 32-byte row, one index per robot
         self._table = np.ascontiguousarray(world.light_table().T)
-        self._levels = None       # the unrounded table, made when a noise model asks for it
+        # the unrounded table, made when a noise model asks for it
+        self._levels: np.ndarray | None = None
 
     @property
     def robots(self) -> int:
@@ -152,7 +155,8 @@ class Episodes:
         """Lamp bearing in the robot frame, degrees, CCW positive, in [-180, 180)."""
         return to_degrees(self._bearing)
 
-    def reset(self, seed, robots: int | None = None, bearing_deg=None) -> np.ndarray:
+    def reset(self, seed: npt.ArrayLike, robots: int | None = None,
+              bearing_deg: npt.ArrayLike | None = None) -> np.ndarray:
         """Start B episodes.
 
         Args:
@@ -171,7 +175,7 @@ class Episodes:
         self.readings = self._sense()
         return self.readings
 
-    def step(self, direction, power) -> np.ndarray | None:
+    def step(self, direction: npt.ArrayLike, power: npt.ArrayLike) -> np.ndarray | None:
         """Apply one turn per robot.
 
         Args:
@@ -205,7 +209,9 @@ class Episodes:
         # one contiguous row, and no caller transposes.
         base = np.empty(rows.shape[::-1], rows.dtype)
         base[...] = rows.T
-        return self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP], out=base).T
+        readings: np.ndarray = self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP],
+                                                out=base).T
+        return readings
 
     def _knocked(self, tenths: np.ndarray) -> np.ndarray:
         """The knock the robot makes of a drawn one (here: as drawn)."""
@@ -230,12 +236,31 @@ class Trace:
     power: np.ndarray
     fitness: np.ndarray = field(init=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.fitness = step_fitness(self.readings, self.power)
 
 
-def run(policy: Policy, seed, robots: int | None = None, world: World = World(),
-        noise: NoiseModel = NoiseModel(), task: Task = Task(), trace: bool = False):
+@overload
+def run(policy: Policy, seed: npt.ArrayLike, robots: int | None = None, world: World = ...,
+        noise: NoiseModel = ..., task: Task = ..., trace: Literal[False] = False) -> np.ndarray:
+    ...
+
+
+@overload
+def run(policy: Policy, seed: npt.ArrayLike, robots: int | None = None, world: World = ...,
+        noise: NoiseModel = ..., task: Task = ..., *, trace: Literal[True]) -> Trace:
+    ...
+
+
+@overload
+def run(policy: Policy, seed: npt.ArrayLike, robots: int | None = None, world: World = ...,
+        noise: NoiseModel = ..., task: Task = ..., trace: bool = False) -> np.ndarray | Trace:
+    ...
+
+
+def run(policy: Policy, seed: npt.ArrayLike, robots: int | None = None, world: World = World(),
+        noise: NoiseModel = NoiseModel(), task: Task = Task(),
+        trace: bool = False) -> np.ndarray | Trace:
     """Run B episodes under ``policy``.
 
     Args:
@@ -248,9 +273,9 @@ def run(policy: Policy, seed, robots: int | None = None, world: World = World(),
         (B,) float32 fitness, the mean step fitness summed step by step; or a ``Trace``.
     """
     env = Episodes(world, noise, task)
-    readings = env.reset(seed, robots)
+    readings: np.ndarray | None = env.reset(seed, robots)
     total = np.zeros(env.robots, np.float32)
-    rows = [] if trace else None
+    rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     while readings is not None:
         direction, power = policy(readings)
         total += step_fitness(readings, power)

@@ -23,6 +23,8 @@ from .fitting import ALPHA, CLOSED_LOOP, golden, present
 BANDS = np.round(np.arange(0.0, 8.0001, 0.1), 1)     # dead-bands tried, degrees
 MIN_TURNS = 20                                         # measured turns a direct fit needs
 FORM = 0.25           # share of the plain scale's objective the form must remove (closed loop)
+GRID_BANDS, GRID_SIDES = (0.0, 2.0, 4.0, 6.0), (-0.3, 0.0, 0.3)    # the closed loop's start
+GRID_GAINS = (0.9, 1.1, 1.3)          # times the plain scale: a dead-band needs more gain
 
 
 @dataclass(frozen=True)
@@ -170,9 +172,9 @@ def _scatter(made: Array, residual: Array) -> tuple[float, float]:
 
 
 def _through_loop(evidence: Evidence) -> tuple[ActuatorResponse, bool]:
-    """Dead-band, asymmetry and gain in turn by golden-section search on the closed loop's
-    statistics; ``plain`` when the dead-band and the sides remove less than ``FORM`` of
-    what the plain scale leaves."""
+    """Dead-band, asymmetry and gain on the closed loop's statistics (a grid, then
+    golden-section search of each in turn); ``plain`` when the dead-band and the sides
+    remove less than ``FORM`` of what the plain scale leaves."""
     kinds = present(evidence, (CLOSED_LOOP,))
     families = evidence.families() - evidence.families('closed_loop_noise')
 
@@ -180,8 +182,14 @@ def _through_loop(evidence: Evidence) -> tuple[ActuatorResponse, bool]:
         return evidence.objective([ActuatorResponse(round(band, 2), round(gain, 4),
                                                     round(asym, 4))], kinds, families)
     scale = golden(lambda g: objective(0.0, g, 0.0), 0.5, 1.6, 7)
-    band = golden(lambda b: objective(b, scale, 0.0), 0.0, 8.0, 7)
-    asym = golden(lambda a: objective(band, scale, a), -0.5, 0.5, 7)
-    gain = golden(lambda g: objective(band, g, asym), scale * 0.85, scale * 1.2, 5)
+    # the dead-band and the sides move the same statistics: a coarse grid of both first,
+    # then each refined in turn
+    band, gain, asym = min(((b, scale * g, a) for b in GRID_BANDS for g in GRID_GAINS
+                            for a in GRID_SIDES), key=lambda p: objective(*p))
+    for _ in range(2):
+        band = golden(lambda b: objective(b, gain, asym), max(0.0, band - 1.5), band + 1.5, 5)
+        asym = golden(lambda a: objective(band, gain, a), max(-0.9, asym - 0.15),
+                      min(0.9, asym + 0.15), 5)
+        gain = golden(lambda g: objective(band, g, asym), gain * 0.85, gain * 1.2, 5)
     plain = objective(band, gain, asym) >= (1 - FORM) * objective(0.0, scale, 0.0)
     return ActuatorResponse(round(band, 2), round(gain, 4), round(asym, 4)), plain

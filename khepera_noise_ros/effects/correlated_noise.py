@@ -2,10 +2,11 @@
 groups, found from the data).
 
 The groups: sensors merged by average linkage of the evidence that their fast noise is
-shared beyond the simulator's (a z per pair, ``Evidence.group_evidence``), while the
-mean evidence between two clusters stays above the threshold.  The strength: from the
-excess covariance within the groups, refined by the simulator; a shared noise of a
-fixed size in readings (a supply, a converter) is tried as well.
+shared beyond the simulator's (a z per pair, ``Evidence.group_evidence``) while the link
+exceeds a z of 4 and chance: the Bonferroni threshold over the pairs, widened by the
+spread of the same evidence between the simulator and itself (``Evidence.group_null``).
+The strength: from the excess covariance within the groups, refined by the simulator; a
+shared noise of a fixed size in readings (a supply, a converter) is tried as well.
 """
 from __future__ import annotations
 
@@ -95,17 +96,19 @@ class CorrelatedNoise(Effect):
 
 def groups_of(evidence: Evidence, z: Array, part: str = 'fast') -> list[list[int]]:
     """Groups (positions in ``evidence.channels``) of the pair evidence ``z``, merged while
-    the link exceeds what chance gives: the Bonferroni threshold over the pairs at
-    ``ALPHA``, scaled by how much wider than N(0, 1) the same evidence is between the
-    simulator and itself (``Evidence.group_null``), so that a chance pair is not put in
-    and a member that is plainly shared is not left out by a fixed threshold."""
+    the link exceeds ``THRESHOLD`` and what chance gives: the Bonferroni threshold over the
+    pairs at ``ALPHA``, scaled by how much wider than N(0, 1) the same evidence is between
+    the simulator and itself (``Evidence.group_null``), so that a chance pair is not put
+    in where the evidence is wide (a threshold below ``THRESHOLD`` let the emulated
+    robot's flicker merge every sensor and its drift go unseen)."""
     c = z.shape[0]
     if c < 2:
         return []
     null = evidence.group_null(part)
     off = ~np.eye(c, dtype=bool)
     spread = float(np.sqrt(np.mean(null[:, off] ** 2))) if null.size else 1.0
-    return cluster(z, max(1.0, spread) * float(sps.norm.isf(ALPHA / (c * (c - 1) / 2))))
+    return cluster(z, max(THRESHOLD,
+                          max(1.0, spread) * float(sps.norm.isf(ALPHA / (c * (c - 1) / 2)))))
 
 
 def cluster(evidence: Array, threshold: float = THRESHOLD) -> list[list[int]]:

@@ -117,16 +117,17 @@ class LightResponse(Effect):
         values: list[float] = []
         for cond in conditions:
             for s in located:       # the model's light corrected by what the robot read
-                mine = sorted((b, float(stock[cond][s, int(round(b * 10)) % TENTHS]) +
-                               r.real - r.sim) for (c, b, k), r in cells.items()
+                mine = sorted((h, float(stock[cond][s, int(round(h * 10)) % TENTHS]) +
+                               r.real - r.sim) for (c, h, k), r in cells.items()
                               if c == cond and k == s)
-                b, v = np.array([b for b, _ in mine]), np.array([v for _, v in mine])
+                knots = np.array([h for h, _ in mine])
+                v = np.array([x for _, x in mine])
                 if sparse:
-                    tabled = stock[cond][s, at] + np.interp(np.mod(bearings, 360.0), np.mod(
-                        b, 360.0), v - stock[cond][s, np.rint(np.mod(b, 360.0) * 10).astype(
-                            int) % TENTHS], period=360.0)
+                    own = stock[cond][s, np.rint(np.mod(knots, 360.0) * 10).astype(int) % TENTHS]
+                    tabled = stock[cond][s, at] + np.interp(
+                        np.mod(bearings, 360.0), np.mod(knots, 360.0), v - own, period=360.0)
                 else:
-                    tabled = around(bearings, b, v)
+                    tabled = around(bearings, knots, v)
                 values += [round(float(x), 2) for x in tabled]
         effect = cls(tuple(located), tuple(float(b) for b in bearings),
                      tuple(float(worlds[c].lamp_distance_mm) for c in conditions),

@@ -1,4 +1,10 @@
-"""``sensor_gain_offset``: each sensor's calibration differs from the light model's."""
+"""``sensor_gain_offset``: each sensor's calibration differs from the light model's.
+
+The fit: the sensors whose levels differ from the light model's (a chi-square over the
+cells, Holm), each with the line mapping simulated levels onto real ones; where the
+levels also move together over time, the steady levels (each run divided by its shared
+factor) are fitted instead.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -24,7 +24,7 @@ class SensorLatency(Effect):
     free: ClassVar[int] = 1
     summary: ClassVar[str] = 'readings arrive late, by whole steps'
     sensors: tuple[int, ...] = param((), 'sensors whose readings arrive late', 'sensors')
-    steps: int = param(1, 'samples each reading arrives late', low=0)
+    steps: int = param(1, 'samples each reading arrives late', low=0, high=1000)
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
         located = rows(self.sensors, channels)

@@ -72,7 +72,7 @@ class EffectEpisodes(Episodes):
             setattr(self, '_levels', np.ascontiguousarray(
                 light_table(world, self.effects).astype(np.float32).T))
 
-    @property    # type: ignore[override]
+    @property
     def task(self) -> Task:
         """The task, its knocks scaled by the turn effects that move them; setting it sets
         the unscaled task."""
@@ -217,7 +217,7 @@ def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), s
     if light:
         level = np.asarray(base, np.float64)
         for e in light:
-            level = e.over_time(level, rng)  # type: ignore[arg-type]
+            level = e.over_time(level, rng)
         flat = levels(level, rounded)
     else:
         flat = cache.levels(base, rounded)
@@ -227,7 +227,7 @@ def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), s
     out = kernel(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
     for e in staged(effects, Stage.READING):
-        out = e.over_time(out, rng)  # type: ignore[arg-type]
+        out = e.over_time(out, rng)
     out = np.rint(out)                    # a new array: clipped in place
     result: Array = np.clip(out, 0.0, DARK, out=out)
     return result

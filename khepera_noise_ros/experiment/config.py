@@ -25,6 +25,7 @@ from ..core.khepera import World
 from ..core.noise import DEFAULT_GROUPS, NoiseModel
 from ..core.task import Task
 from ..reality.effects import EffectsConfig
+from . import fitted
 
 FORMAT = 'khepera-noise-replicate-config/1'
 MODELS = ('combination', 'independent')     # the compared models, the paper's order
@@ -60,6 +61,9 @@ DEFAULTS: dict = {
     # and its best tested on the same episodes: how much of the drop real training can
     # recover on this reality at all.  ``enabled`` is not hashed: it adds steps to a run.
     'ceiling': {'enabled': False, 'population': 25, 'generations': 50},
+    # the diagnosed condition (--params): null, or a fitted_params.yaml's path or the
+    # simulator parameters it holds (its noise and effects; the world and task are these)
+    'diagnosed': None,
     'quick': {'trials': 3},
 }
 # Measurement protocols: overrides laid over the defaults (``measured`` is the defaults).
@@ -74,20 +78,24 @@ PROTOCOLS: dict = {
 
 @dataclass(frozen=True)
 class Condition:
-    """One arm of the experiment: a noise level and the model the simulator uses."""
+    """One arm of the experiment: a noise level and the model the simulator uses (and, for
+    the diagnosed condition, no level and the fitted effects)."""
 
-    level: str            # the level's label, e.g. '5%'
-    model: str            # 'combination' or 'independent'
+    level: str            # the level's label, e.g. '5%'; '' for the diagnosed condition
+    model: str            # 'combination', 'independent' or 'diagnosed'
     noise: NoiseModel
+    effects: tuple = ()   # the simulator's effects (``khepera_noise_ros.effects``)
 
     @property
     def name(self) -> str:
-        """The paper's name, as in Table 1: '5% combination'."""
-        return f'{self.level} {self.model}'
+        """The paper's name, as in Table 1: '5% combination'; 'diagnosed'."""
+        return f'{self.level} {self.model}' if self.level else self.model
 
     @property
     def key(self) -> str:
         """A file-name-safe form of ``name``: '5pct-combination'."""
+        if not self.level:
+            return self.model
         return f"{self.level.replace('%', 'pct').replace(' ', '_')}-{self.model}"
 
 
@@ -114,6 +122,7 @@ class ReplicateConfig:
     reality: dict
     backend: dict
     ceiling: EAConfig | None = None       # phase 2 with the ceiling's budget, when enabled
+    diagnosed: Condition | None = None    # the fitted simulator, beside the paper's models
 
     @property
     def effects(self) -> EffectsConfig:
@@ -122,7 +131,9 @@ class ReplicateConfig:
 
     @property
     def conditions(self) -> tuple[Condition, ...]:
-        return tuple(c for level in self.levels for c in level.conditions)
+        """The paper's conditions, level by level, then the diagnosed one if any."""
+        return tuple(c for level in self.levels for c in level.conditions) + \
+            ((self.diagnosed,) if self.diagnosed is not None else ())
 
     @property
     def hash(self) -> str:
@@ -130,6 +141,8 @@ class ReplicateConfig:
         whether the ceiling arm runs: a run resumed with it keeps its steps 1-5)."""
         data = {**self.data, 'ceiling': {k: v for k, v in self.data['ceiling'].items()
                                          if k != 'enabled'}}
+        if data['diagnosed'] is None:       # runs without it keep the hash they had
+            del data['diagnosed']
         text = json.dumps(data, sort_keys=True, separators=(',', ':'))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -174,6 +187,8 @@ def read_yaml(path) -> dict:
     reality = loaded.get('reality')
     if isinstance(reality, dict) and isinstance(reality.get('effects'), str):
         reality['effects'] = str(path.parent / reality['effects'])   # beside the file
+    if isinstance(loaded.get('diagnosed'), str):
+        loaded['diagnosed'] = str(path.parent / loaded['diagnosed'])
     return loaded
 
 
@@ -225,13 +240,18 @@ def build(data: dict) -> ReplicateConfig:
         raise ValueError(f'reality.start_bearing_deg must be null or degrees in [-180, 180], '
                          f'got {start!r}')
     plain['reality']['effects'] = effects_from(plain['reality']['effects']).to_dict()
+    diagnosed = None
+    if plain['diagnosed'] is not None:
+        plain['diagnosed'] = fitted.parameters(plain['diagnosed'])
+        sim = fitted.simulator(plain['diagnosed'])
+        diagnosed = Condition('', fitted.NAME, sim.noise, tuple(sim.effects))
     phase2 = _typed(EAConfig, data, 'phase2')
     return ReplicateConfig(
         data=plain, seed=seed, trials=trials, test_episodes=test_episodes, levels=levels,
         phase1=_typed(EAConfig, data, 'phase1'), phase2=phase2,
         task=_typed(Task, data, 'task'), world=_typed(World, data, 'world'),
         reality=plain['reality'], backend=plain['backend'],
-        ceiling=_ceiling(plain['ceiling'], phase2))
+        ceiling=_ceiling(plain['ceiling'], phase2), diagnosed=diagnosed)
 
 
 def _ceiling(spec: dict, phase2: EAConfig) -> EAConfig | None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import atomic_write_text, write_json
-from . import figures, stats_report
+from . import diagnosed, figures, stats_report
 from .config import Level, ReplicateConfig
 from .protocol import CEILING_STEPS, STEPS
 from .recovery import recovery, recovery_md, recovery_summary
@@ -84,7 +84,8 @@ def analyse(results: Results, figure8: dict | None) -> dict:
                           for level in config.levels for s in STEPS],
                 'best_generation': [_generation_test(results, level, stats_settings['alpha'])
                                     for level in config.levels],
-                'figure8': figure8, 'recovery': recovery(results)}
+                'figure8': figure8, 'recovery': recovery(results),
+                'diagnosed': diagnosed.analyse(results)}
     analysis['findings'] = findings(analysis, config)
     return analysis
 
@@ -168,7 +169,7 @@ def _mean(analysis: dict, name: str, step: int) -> float:
 
 
 def _ranking(analysis: dict) -> dict:
-    ours = [r['condition'] for r in analysis['table1']]
+    ours = [r['condition'] for r in analysis['table1'] if r['paper'] is not None]
     paper = sorted(PAPER['table1'], key=lambda n: -PAPER['table1'][n])
     return _finding('Table 1 ranking of final real-world performance', ' > '.join(paper),
                     ' > '.join(ours), ours == paper)
@@ -303,7 +304,8 @@ def _f(x: float, digits: int = 4) -> str:
 def markdown(config: ReplicateConfig, analysis: dict, backends: dict, sessions: list) -> str:
     s = analysis['statistics']
     parts = [_head(config, analysis, backends, sessions), _table1_md(analysis),
-             _steps_md(config, analysis), recovery_md(config, analysis['recovery']),
+             _steps_md(config, analysis), diagnosed.markdown(analysis.get('diagnosed')),
+             recovery_md(config, analysis['recovery']),
              stats_report.generation_md(analysis['best_generation']),
              stats_report.power_md(config.trials, analysis['tests'], s['margin'], s['alpha'],
                                    s['target']),
@@ -486,5 +488,6 @@ def summary(analysis: dict) -> str:
     lines += [f"  {r['rank']}. {r['condition']:<17} {r['mean']:.4f} ± {r['sd']:.4f}   "
               f"paper {_f(r['paper']) if r['paper'] else '-'}" for r in analysis['table1']]
     lines.append(recovery_summary(analysis['recovery']))
+    lines += [x for x in [diagnosed.summary(analysis.get('diagnosed')).rstrip()] if x]
     lines.append(f"Of the paper's findings: {_tally(analysis)}.")
     return '\n'.join(lines) + '\n'

@@ -35,6 +35,7 @@ KEYS = ('shares', 'levels', 'groupings', 'control', 'trials')
 DEFAULTS = {'shares': [0.0, 0.5, 1.0], 'levels': [0.05, 0.10], 'groupings': ['front'],
             'control': True, 'trials': 50}
 CONTROL = 'control'
+ROBOT = 'robot'
 # the control's reality draws its noise from other streams than the simulation tests
 CONTROL_SALT = 0x5DEECE66D
 
@@ -43,18 +44,23 @@ CONTROL_SALT = 0x5DEECE66D
 class Point:
     """One emulated reality of the sweep."""
 
-    shared: float | None        # None for the control
+    shared: float | None        # None for the control and the robot
     level: float | None
     grouping: str | None
+    ports: tuple[str, ...] = ()     # the robot on these serial ports is reality
 
     @property
     def key(self) -> str:
+        if self.ports:
+            return ROBOT
         if self.shared is None:
             return CONTROL
         return f'share{self.shared:g}-level{self.level:g}-{self.grouping}'
 
     @property
     def label(self) -> str:
+        if self.ports:
+            return f"the robot on {', '.join(self.ports)}"
         if self.shared is None:
             return 'control: reality = simulator (combination)'
         return f'{self.shared:.0%} shared of {self.level:.0%} ({self.grouping})'
@@ -111,7 +117,9 @@ def point_config(base: ReplicateConfig, point: Point) -> ReplicateConfig:
     """The replication's settings with this point's reality; the control's reality is not
     the emulator, and its settings say so (and so hash apart)."""
     data = copy.deepcopy(base.data)
-    if point.shared is None:
+    if point.ports:
+        data['reality']['ports'] = list(point.ports)
+    elif point.shared is None:
         data['reality']['control'] = 'the simulator with the first level\'s combination model'
     else:
         data['reality']['effects'] = point.effects(base.effects).to_dict()
@@ -179,8 +187,39 @@ def analyse(results: list[tuple[Point, object, ReplicateConfig]]) -> dict:
                     row['differences'][f'{level.label} step {s}'] = {
                         'difference': d, 'ci_low': lo, 'ci_high': hi, 'n': [len(a), len(b)]}
         row['recovery'] = recovery(steps)
+        row['diagnosed'] = _diagnosed(config, steps)
         rows.append(row)
     return {'points': rows}
+
+
+def _diagnosed(config: ReplicateConfig, steps: dict) -> dict:
+    """Diagnosed minus each paper condition at steps 3 and 5, with Welch's 95% CI."""
+    out: dict = {}
+    d = config.diagnosed
+    for s in (3, 5) if d is not None else ():
+        for c in config.conditions:
+            a, b = steps[s][d.name], steps[s][c.name]
+            if c is not d and len(a) >= 2 and len(b) >= 2:
+                diff, lo, hi = difference_ci(a, b)
+                out[f'{c.name} step {s}'] = {'difference': diff, 'ci_low': lo, 'ci_high': hi}
+    return out
+
+
+def diagnosed_table(analysis: dict, step: int = 3) -> str:
+    """Markdown: per point, diagnosed minus each paper condition at ``step``."""
+    rows = [r for r in analysis['points'] if r.get('diagnosed')]
+    if not rows:
+        return ''
+    against = [k[:-len(f' step {step}')] for k in rows[0]['diagnosed']
+               if k.endswith(f' step {step}')]
+    lines = ['| reality | ' + ' | '.join(f'diagnosed - {c}' for c in against) + ' |',
+             '|' + ' --- |' * (len(against) + 1)]
+    for r in rows:
+        cells = [r['diagnosed'].get(f'{c} step {step}') for c in against]
+        lines.append(f"| {r['label']} | " + ' | '.join(
+            '' if d is None else f"{d['difference']:+.3f} [{d['ci_low']:+.3f}, "
+                                 f"{d['ci_high']:+.3f}]" for d in cells) + ' |')
+    return '\n'.join(lines) + '\n'
 
 
 def recovery(steps: dict[int, dict[str, list[float]]]) -> dict:

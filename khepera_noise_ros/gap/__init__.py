@@ -5,9 +5,9 @@
   target      recordings against the simulator         evidence    what locates an effect
   compare     z, Holm, discrepancy, where              families    the statistic families
   stationary  statistics of stationary recordings      closedloop  ... of closed-loop ones
-  converter   dropouts, limits, the lattice            bootstrap   the block bootstrap
-  replay      a protocol in the simulator              protocol    what a recording is
-  split       fit and held-out parts                   allan       Allan deviation
-  identify    the world model's parts, first           turns       turn statistics per command
-  turncal     the turn calibration's replay and turns  report      diagnosis.json, report.md
+  converter   limits, the lattice                      dropouts    lost readings, counted
+  bootstrap   the block bootstrap                      replay      a protocol in the simulator
+  protocol    what a recording is                      split       fit and held-out parts
+  allan       Allan deviation                          identify    the world model, first
+  turns       turn statistics per command              turncal     the turn calibration
 """

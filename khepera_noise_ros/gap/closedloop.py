@@ -62,17 +62,20 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
     dy = imbalance[ok + 1] - imbalance[ok]
     e = ep[ok]
-    parts['xtx'] = _by(e, xr[:, :, None] * xr[:, None, :], m)
+    parts['xtx'] = _gram(e, xr, xr, m)
     parts['xty'] = _by(e, xr * dy[:, None], m)
-    parts['xty_sensor'] = _by(e, xr[:, :, None] * dr[:, None, :], m)
+    parts['xty_sensor'] = _gram(e, xr, dr, m)
     design = np.concatenate([u[ok, None], u[ok - 1, None], np.ones((ok.size, 1)), r[ok],
                              u[ok, None] * r[ok] / 100.0], axis=1)
     w = _bands(u[ok])
     parts['scatter_n'] = _by(e, w, m)
-    parts['scatter_xx'] = _by(e, w[:, :, None, None] * (design[:, :, None] * design[:, None, :])
-                              [:, None], m)
-    parts['scatter_xy'] = _by(e, w[:, :, None, None] * (design[:, :, None] * dr[:, None, :])
-                              [:, None], m)
+    inside = w.any(axis=1)             # each row in its band's group only
+    band = e[inside] * w.shape[1] + w[inside].argmax(axis=1)
+    shape = (m, w.shape[1], design.shape[1])
+    parts['scatter_xx'] = _gram(band, design[inside], design[inside], shape[0] * shape[1]) \
+        .reshape(shape + design.shape[1:])
+    parts['scatter_xy'] = _gram(band, design[inside], dr[inside], shape[0] * shape[1]) \
+        .reshape(shape + dr.shape[1:])
     parts['scatter_yy'] = _by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
         t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
@@ -90,11 +93,30 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
 
 
 def _by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product)."""
-    pick = sparse.csr_matrix((np.ones(ep.size), (ep, np.arange(ep.size))),
-                             shape=(episodes, ep.size))
-    out: Array = np.asarray(pick @ values.reshape(ep.size, -1), np.float64)
+    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product; its
+    rows straight from ``ep`` where that is in order, as it is in episode order)."""
+    n = ep.size
+    if n and np.all(ep[1:] >= ep[:-1]):
+        indptr = np.searchsorted(ep, np.arange(episodes + 1))
+        pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
+    else:
+        pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
+    out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
+
+
+def _gram(group: np.ndarray, a: Array, b: Array, groups: int) -> Array:
+    """(groups, ka, kb) sums of the outer products of the rows of ``a`` and ``b`` by group:
+    one matrix product per group, never the (N, ka, kb) products themselves."""
+    if group.size and not np.all(group[1:] >= group[:-1]):
+        order = np.argsort(group, kind='stable')
+        group, a, b = group[order], a[order], b[order]
+    out = np.zeros((groups, a.shape[1], b.shape[1]))
+    bounds = np.searchsorted(group, np.arange(groups + 1))
+    for g in np.flatnonzero(bounds[1:] > bounds[:-1]):
+        rows = slice(bounds[g], bounds[g + 1])
+        out[g] = a[rows].T @ b[rows]
+    return out
 
 
 def _bands(u: Array) -> Array:
@@ -138,7 +160,7 @@ def _view(name: str, x: Array, onehot: Array | None, use: np.ndarray, lagged: np
     lag = np.zeros_like(x)
     lag[1:] = x[1:] * x[:-1]
     out = {f'{name}_n': _by(ep, use[:, None] * 1.0, m),
-           f'{name}_s2': scale * _by(ep, xs[:, :, None] * xs[:, None, :], m),
+           f'{name}_s2': scale * _gram(ep, xs, xs, m),
            f'{name}_lag_n': _by(ep, lagged[:, None] * 1.0, m),
            f'{name}_lag_s': scale * _by(ep, lag * lagged[:, None], m)}
     if onehot is not None:
@@ -180,7 +202,7 @@ def _change_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, ste
     return {'chg_band_n': _by(ep, onehot * 1.0, m),
             'chg_band_s2': 0.5 * _by(ep, onehot * (e * e)[:, None, :], m),
             'chg_q_n': _by(ep, both * 1.0, m),
-            'chg_q_xy': 0.5 * _by(ep, eq[:, :, None] * eq[:, None, :], m),
+            'chg_q_xy': 0.5 * _gram(ep, eq, eq, m),
             'chg_q_xx': 0.5 * _by(ep, (eq * eq)[:, :, None] * both, m),
             'chg_lag_n': _by(ep, lagged * 1.0, m), 'chg_lag_s': 0.5 * _by(ep, lag * lagged, m)}
 
@@ -230,8 +252,8 @@ def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
     x = np.stack([np.ones_like(h), hc, hc * hc] + turns, axis=1)
     use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
     cells, w = int(cell.max()) + 1, use.astype(np.float64)
-    xx = _by(cell, w[:, None, None] * x[:, :, None] * x[:, None, :], cells)
-    xr = _by(cell, w[:, None, None] * x[:, :, None] * r[:, None, :], cells)
+    xw = x * w[:, None]
+    xx, xr = _gram(cell, xw, x, cells), _gram(cell, xw, r, cells)
     scale = np.trace(xx, axis1=-2, axis2=-1)[..., None, None] + 1e-12
     beta = np.linalg.solve(xx + 1e-10 * scale * np.eye(REGRESSORS), xr)
     e = r - np.einsum('ni,nik->nk', x, beta[cell])

@@ -17,7 +17,8 @@ from . import allan, bootstrap, identify, split
 from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
-from .select import MIN_ADDED, MIN_REDUCTION, Compound, Selection, as_good, fit_one, free
+from .select import (MIN_ADDED, MIN_REDUCTION, Compound, Selection, as_good, fit_one, free,
+                     loop_worse)
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -152,9 +153,12 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     before_reps = b.replicate_discrepancies(before)
 
     def rank(b: Target) -> list[Scored]:
-        scored = sorted((_score(b, cand, d_before, before_reps) for cand in candidates),
-                        key=lambda s: -s[0]['heldout_reduction'])
+        base = before if b is held_out else b.compare()
+        scored = sorted((_score(b, cand, d_before, before_reps, base) for cand in candidates),
+                        key=lambda s: (bool(s[0].get('closed_loop_worse')),
+                                       -s[0]['heldout_reduction']))
         return _parsimonious(scored, o.alpha)
+    held_out = b
     scored = rank(b)
     if significant and o.rounding:
         best = scored[0][2] if scored and scored[0][1] is not None else None
@@ -171,7 +175,8 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if significant and best_entry is not None:
         if best_effect is not None and best_cmp is not None and best_reps is not None and \
                 best_entry['heldout_reduction'] >= least and \
-                best_entry['p_value'] < o.reduction_alpha:
+                best_entry['p_value'] < o.reduction_alpha and \
+                not best_entry.get('closed_loop_worse'):
             result.top_effect, result.fitted = best_entry['name'], best_effect
             result.held_out_after = best_cmp
             if o.compound:
@@ -208,8 +213,11 @@ def _compound(result: Diagnosis, a: Target, b: Target,
     return a, b
 
 
-def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array) -> Scored:
-    """(effects entry, held-out comparison, effect, replicate discrepancies after)."""
+def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array,
+           base: Comparison) -> Scored:
+    """(effects entry, held-out comparison, effect, replicate discrepancies after); an
+    effect that predicts the held-out closed loop worse than ``base`` says so and ranks
+    after every other (``select.loop_worse``)."""
     entry = {'name': cand.name, 'sensors': [], 'parameters': {},
              'discrepancy_before': d_before, 'discrepancy_after': d_before,
              'heldout_reduction': 0.0, 'reduction_interval': [0.0, 0.0], 'p_value': 1.0,
@@ -231,6 +239,10 @@ def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array) -> S
                   'reduction_interval': [float(np.quantile(reps, 0.025)),
                                          float(np.quantile(reps, 0.975))],
                   'p_value': float((np.sum(reps <= 0) + 1) / (reps.size + 1))})
+    worse = loop_worse(b, [], [cand.effect], base, after)
+    if worse:
+        entry['closed_loop_worse'] = worse
+        entry['note'] = f'{cand.note}; predicts the held-out closed loop ({worse}) worse: not kept'
     return entry, after, cand.effect, after_reps
 
 
@@ -241,6 +253,7 @@ def _parsimonious(scored: list[Scored], alpha: float) -> list[Scored]:
         return scored
     best, best_reps = scored[0], scored[0][3]
     rivals = [s for s in scored[1:] if s[3] is not None and s[0]['heldout_reduction'] > 0
+              and not s[0].get('closed_loop_worse')
               and free(s[0]['name']) < free(best[0]['name'])
               and as_good(best[0]['discrepancy_after'], best_reps, s[0]['discrepancy_after'],
                           s[3], alpha)]

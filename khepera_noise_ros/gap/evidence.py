@@ -11,6 +11,7 @@ from ..effects.base import Array, Row
 from ..effects.fitting import ALPHA, holm
 from ..recording import Recording
 from .protocol import runs
+from .stationary import own_part
 
 Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
 WINDOW = 8                    # samples averaged into one value of the slow part
@@ -168,11 +169,8 @@ def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[A
     y = rec.readings[np.concatenate(kept)][:, used].astype(np.float64)
     level = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
     y -= np.repeat(level, sizes, axis=0)
-    others = (y[:, ref].sum(axis=1, keepdims=True) - y * ref) / np.maximum(ref.sum() - ref, 1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        beta = np.add.reduceat(y * others, starts, axis=0) / \
-            np.add.reduceat(others * others, starts, axis=0)
-    e = y - np.repeat(np.nan_to_num(beta), sizes, axis=0) * others
+    e = own_part(y, ref, lambda v: np.add.reduceat(v, starts, axis=0),
+                 np.repeat(np.arange(sizes.size), sizes))
     den = np.add.reduceat(e * e, starts, axis=0)
     good = (den > 0) & (level > MIN_LEVEL)
     left = np.repeat(sizes, sizes) - (np.arange(y.shape[0]) - np.repeat(starts, sizes))

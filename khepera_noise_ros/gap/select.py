@@ -22,6 +22,9 @@ FINGERPRINT_REPLICATES = 40
 JOINT = 1                 # candidates per step refitted jointly with the chosen ones
 CONFIRM_SEED = 5003       # offset of the second simulator seed
 LOOP = ('sensor_latency', 'actuator_turn_error')
+# what the recorded controller's actions produce: a model that predicts these worse on the
+# held-out episodes is not kept, however well it fits the rest
+LOOP_PARTS = ('closed_loop', 'closed_loop_noise')
 
 
 def free(name: str) -> int:
@@ -118,6 +121,7 @@ class Selection:
 
     def __init__(self, a: Target, b: Target, first: Comparison, d_before: float):
         self.a, self.b, self.first, self.d_before = a, b, first, d_before
+        self.vetoed: dict[str, str] = {}     # effect -> the closed-loop part it predicts worse
 
     def run(self, best: tuple[Effect, str, Comparison, Array], names: Sequence[str],
             before_reps: Array, log: Callable[[str], None] | None = None) -> Compound:
@@ -165,8 +169,8 @@ class Selection:
                     step = Step(cand, after, effects, reps, p, rule)
                     break
                 rejected.append({'name': cand.name, 'added_reduction': added, 'p_value': p,
-                                 'note': cand.note,
-                                 'parts': self._detail(current, after)})
+                                 'note': cand.note, 'parts': self._detail(current, after),
+                                 'closed_loop_worse': self.vetoed.get(cand.name, '')})
             if step is None:
                 break
             step = self._simplest(step, trials, current, current_reps, chosen, d_prev)
@@ -256,6 +260,9 @@ class Selection:
         # closer; an effect adding fast noise rightly widens the spreads' error bars
         if rule and effects[-1].name == 'temporal_drift' and not _closer(current, after):
             rule = ''
+        worse = loop_worse(b, chosen, effects, current, after) if rule else ''
+        if worse:
+            rule, self.vetoed[effects[-1].name] = '', worse
         return rule, reps, p, added
 
     def _confirmed(self, chosen: list[Effect], effects: list[Effect],
@@ -333,6 +340,27 @@ def part_step(b: Target, first: Comparison, current: Comparison, after: Comparis
         if max(local, left) > gain:
             best, gain = p, max(local, left)
     return best
+
+
+def loop_worse(b: Target, chosen: list[Effect], effects: list[Effect], current: Comparison,
+               after: Comparison) -> str:
+    """The part of ``LOOP_PARTS`` that the simulator with ``effects`` (``after``) predicts
+    significantly worse than with ``chosen`` (``current``) on the held-out episodes
+    (one-sided, paired replicates), on a second simulator seed too; or ''."""
+    def worse(t: Target, c: Comparison, a: Comparison) -> list[str]:
+        out = []
+        for part in LOOP_PARTS:
+            cp, ap = c.part(part), a.part(part)
+            if cp.keys and ap.discrepancy > cp.discrepancy and paired_p(
+                    t.replicate_discrepancies(ap), t.replicate_discrepancies(cp),
+                    ap.discrepancy, cp.discrepancy) < STEP_ALPHA:
+                out.append(part)
+        return out
+    first = worse(b, current, after)
+    if not first:
+        return ''
+    again = worse(*second_seed(b, chosen, effects))
+    return next((p for p in first if p in again), '')
 
 
 def _with(chosen: list[Effect], cand: Candidate) -> list[Effect]:

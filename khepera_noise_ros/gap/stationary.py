@@ -3,13 +3,12 @@ heading) and per condition, over residuals about each run's mean."""
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from scipy import sparse
 
-from ..effects.base import Array
-from ..effects.base import Key
+from ..effects.base import AnyArray, Array, Key
 from ..recording import Recording
 from . import bootstrap
 
@@ -164,18 +163,25 @@ def _lagged(v: Array, hit: np.ndarray, partner: np.ndarray, lag: int) -> Array:
     return out
 
 
-def _own(y: Array, lay: Layout) -> Array:
-    """Each sensor's own part of the run residuals ``y``: less its per-run regression on
-    the mean of the others, zero at the first ``SKIP`` samples of a run."""
-    c = y.shape[1]
-    if c < MIN_OWN:
-        return np.zeros_like(y)
-    yr = y.astype(np.float32) * lay.own_kept
-    others = (yr.sum(axis=1, keepdims=True) - yr) * np.float32(1.0 / (c - 1))
-    cross, square = lay.by_run(yr * others), lay.by_run(others * others)
+def own_part(y: AnyArray, ref: np.ndarray, by_run: Callable[[AnyArray], AnyArray],
+             run_of: np.ndarray) -> AnyArray:
+    """Each sensor's own part of the run residuals ``y`` (the one definition): less its
+    per-run regression on the mean of the others among ``ref`` (a mask of the sensors);
+    ``by_run``: per-run sums, ``run_of``: each row's run."""
+    count = np.maximum(ref.sum() - ref, 1).astype(y.dtype)
+    others = (y[:, ref].sum(axis=1, keepdims=True) - y * ref) / count
+    cross, square = by_run(y * others), by_run(others * others)
     beta = np.divide(cross, square, out=np.zeros_like(cross), where=square > 0)
-    out: Array = yr - beta.astype(np.float32)[lay.run_of] * others
+    out: AnyArray = y - beta.astype(y.dtype)[run_of] * others
     return out
+
+
+def _own(y: Array, lay: Layout) -> Array:
+    """``own_part`` of all the sensors, zero at the first ``SKIP`` samples of a run."""
+    if y.shape[1] < MIN_OWN:
+        return np.zeros_like(y)
+    return own_part(y.astype(np.float32) * lay.own_kept, np.ones(y.shape[1], bool), lay.by_run,
+                    lay.run_of)
 
 
 def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:

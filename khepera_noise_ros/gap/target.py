@@ -14,7 +14,7 @@ from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
 from ..recording import Recording
-from . import bootstrap, closedloop, converter, evidence, stationary, turncal, turns
+from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turncal, turns
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
 from .families import FAMILIES, having, of_part
 from ..simconfig import SimConfig
@@ -38,10 +38,10 @@ class Repaired:
     kind: str
 
     @staticmethod
-    def of(rec: Recording, runs: converter.Runs | None = None) -> 'Repaired':
+    def of(rec: Recording, runs: dropouts.Runs | None = None) -> 'Repaired':
         k = kind(rec)
-        readings, marks, ends = converter.repair(
-            rec.readings, runs or converter.Runs(episodes(rec), len(rec)), k == 'closed_loop')
+        readings, marks, ends = dropouts.repair(
+            rec.readings, runs or dropouts.Runs(episodes(rec), len(rec)), k == 'closed_loop')
         if readings is not rec.readings:
             rec = dataclasses.replace(rec, readings=readings)
         return Repaired(rec, marks, ends, k)
@@ -60,7 +60,8 @@ class Memory:
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
-    runs: dict[tuple[int, int], converter.Runs] = field(default_factory=dict)
+    runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
+    real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
 
 
 class Target:
@@ -123,7 +124,7 @@ class Target:
             if hit is None:
                 sim = self._replayer(i).replay(effects, self.seed + 7919 * i, copies)
                 if (i, copies) not in self.memory.runs:       # the same for every replay
-                    self.memory.runs[(i, copies)] = converter.Runs(episodes(sim), len(sim))
+                    self.memory.runs[(i, copies)] = dropouts.Runs(episodes(sim), len(sim))
                 hit = Repaired.of(sim, self.memory.runs[(i, copies)])
                 hit.recording.readings.flags.writeable = False
                 if remember:
@@ -240,12 +241,12 @@ class Target:
         c = compare(self.real, sim, factor)
         if not any(FAMILIES[k.family].counted for k in c.keys):
             return c
-        real, own = converter.counts(self.real_data), converter.counts(self.simulate(effects))
-        k = converter.count_copies(sum(len(r) for r in self.recordings), self.copies)
-        if k == self.copies or not converter.undecided(real, own):
+        real, own = dropouts.counts(self.real_data), dropouts.counts(self.simulate(effects))
+        k = dropouts.count_copies(sum(len(r) for r in self.recordings), self.copies)
+        if k == self.copies or not dropouts.undecided(real, own):
             return recount(c, real, own)
         more = self.simulate(effects, copies=k, remember=False)
-        return recount(c, real, converter.counts(more))
+        return recount(c, real, dropouts.counts(more))
 
     def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
                   families: frozenset[str] | None = None, margin: float = MARGIN,
@@ -261,8 +262,10 @@ class Target:
 
     def _objective(self, effects: Sequence[Effect], kinds: Sequence[str] | None,
                    families: frozenset[str] | None, margin: float, limits: bool) -> float:
-        chosen = self._chosen(kinds)
-        real = Stats.join([self._real[i] for i in chosen])
+        chosen = tuple(self._chosen(kinds))
+        if chosen not in self.memory.real:
+            self.memory.real[chosen] = Stats.join([self._real[i] for i in chosen])
+        real = self.memory.real[chosen]
         n = sum(len(r) for r in self.recordings)
         copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
@@ -379,9 +382,9 @@ class TargetEvidence:
 
     def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect:
         t = self.target
-        real = converter.seen_share(t.real_data, sensors)
-        sim = converter.seen_share(t.simulate([effect]), sensors)
-        rate = converter.rescaled_rate(getattr(effect, 'dropout'), real, sim)
+        real = dropouts.seen_share(t.real_data, sensors)
+        sim = dropouts.seen_share(t.simulate([effect]), sensors)
+        rate = dropouts.rescaled_rate(getattr(effect, 'dropout'), real, sim)
         return dataclasses.replace(effect, dropout=rate)  # type: ignore[call-arg]
 
     def delayed_sensors(self) -> tuple[int, ...]:

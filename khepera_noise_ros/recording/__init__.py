@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..files import StrPath
 from .csv import paths, read_csv, read_manifest, write_csv
 from .model import (COLUMNS, FORMAT, KHEPERA_CHANNELS, KHEPERA_RANGE, PROTOCOLS, SOURCES,
                     Recording, RecordingError, check_manifest, check_sequence, columns,
@@ -20,7 +21,7 @@ __all__ = ['COLUMNS', 'FORMAT', 'KHEPERA_CHANNELS', 'KHEPERA_RANGE', 'PROTOCOLS'
            'write_csv']
 
 
-def load(path) -> Recording:
+def load(path: StrPath) -> Recording:
     """Read a recording: a rosbag2 directory, or NAME / NAME.csv / NAME.yaml."""
     path = Path(path)
     if path.is_dir():
@@ -29,7 +30,7 @@ def load(path) -> Recording:
     return read_csv(path)
 
 
-def bag_path(path) -> Path:
+def bag_path(path: StrPath) -> Path:
     """Where the rosbag2 twin of recording NAME goes: NAME_bag/."""
     stem = paths(path)[0].with_suffix('')
     return stem.with_name(stem.name + '_bag')

@@ -11,13 +11,20 @@ from __future__ import annotations
 import math
 import struct
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 
-from ..files import replace_tree, staging_path
+from ..files import StrPath, replace_tree, staging_path
 from .model import (Recording, RecordingError, check_manifest, check_sequence,
                     dump_manifest, finish_manifest, first_bad_row)
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection, Qos
+    from rosbags.typesys.store import Typestore
 
 LIGHT, BEARING, CMD_TURN = 'light', 'bearing', 'cmd_turn'
 MANIFEST, CONDITION = 'recording/manifest', 'recording/condition'
@@ -27,7 +34,7 @@ TYPES = {LIGHT: 'std_msgs/msg/Float64MultiArray', BEARING: 'std_msgs/msg/Float64
 HEADER = 2                                     # episode, step in the MultiArray padding
 
 
-def _rosbags():
+def _rosbags() -> tuple[ModuleType, Typestore]:
     """(rosbag2 module, typestore), or an ImportError that says what to install."""
     try:
         from rosbags import rosbag2
@@ -40,7 +47,7 @@ def _rosbags():
 
 # -- writing ------------------------------------------------------------------------------
 
-def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
+def write_bag(rec: Recording, path: StrPath, namespace: str = '', start_ns: int = 0,
               overwrite: bool = False) -> Path:
     """Write ``rec`` as a rosbag2 directory with MCAP storage; returns the path."""
     rosbag2, store = _rosbags()
@@ -59,7 +66,7 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
                                          offered_qos_profiles=[_qos(t)])
                 for t in TYPES}
 
-        def put(topic, stamp, msg):
+        def put(topic: str, stamp: int, msg: object) -> None:
             writer.write(conn[topic], stamp, store.serialize_cdr(msg, TYPES[topic]))
 
         put(MANIFEST, start_ns, _string(store, dump_manifest(manifest)))
@@ -82,7 +89,7 @@ def write_bag(rec: Recording, path, namespace: str = '', start_ns: int = 0,
     return replace_tree(staged, path)
 
 
-def _qos(topic: str):
+def _qos(topic: str) -> Qos:
     """The graph's QoS (reliable, volatile, keep last 10); the manifest is latched."""
     from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
                                     QosReliability, QosTime)
@@ -97,11 +104,12 @@ def _topic(namespace: str, name: str) -> str:
     return '/' + '/'.join(p for p in (namespace.strip('/'), name) if p)
 
 
-def _string(store, text: str):
+def _string(store: Typestore, text: str) -> object:
     return store.types[TYPES[MANIFEST]](data=text)
 
 
-def _multiarray(store, topic: str, key: tuple[int, int], values):
+def _multiarray(store: Typestore, topic: str, key: tuple[int, int],
+                values: Sequence[float] | NDArray[np.float64]) -> object:
     """One robot's row with the (episode, step) header in the padding, as protocol.py packs."""
     dtype = np.int32 if topic == CMD_TURN else np.float64
     label = {LIGHT: 'sensors', BEARING: 'bearing_deg', CMD_TURN: 'turn'}[topic]
@@ -117,7 +125,7 @@ def _multiarray(store, topic: str, key: tuple[int, int], values):
 
 # -- reading ------------------------------------------------------------------------------
 
-def read_bag(path) -> Recording:
+def read_bag(path: StrPath) -> Recording:
     """Read a rosbag2 directory written by ``write_bag`` (or recorded from the topics)."""
     rosbag2, store = _rosbags()
     from rosbags.serde import SerdeError
@@ -139,9 +147,9 @@ def read_bag(path) -> Recording:
     return parsed.recording()
 
 
-def _find_topics(path: Path, connections) -> dict:
+def _find_topics(path: Path, connections: Sequence[Connection]) -> dict[str, Connection]:
     """Connection per role, matched on the topic's trailing name in any one namespace."""
-    found = {}
+    found: dict[str, Connection] = {}
     for c in connections:
         for role in TYPES:
             if c.topic == '/' + role or c.topic.endswith('/' + role):
@@ -162,20 +170,22 @@ def _find_topics(path: Path, connections) -> dict:
 class _Parsed:
     """Messages collected per topic, each checked as it arrives."""
 
-    def __init__(self, path: Path, topics: dict):
+    def __init__(self, path: Path, topics: dict[str, Connection]) -> None:
         self.path = path
         self.role = {c.id: role for role, c in topics.items()}
         self.topic = {c.id: c.topic for c in topics.values()}
         self.count = {role: 0 for role in TYPES}
-        self.manifest = None
-        self.light: list[tuple[tuple[int, int], np.ndarray, int]] = []
-        self.extra = {BEARING: {}, CMD_TURN: {}}
+        self.manifest: dict[str, Any] | None = None
+        self.light: list[tuple[tuple[int, int], NDArray[np.float64], int]] = []
+        # role -> (episode, step) -> (values, where)
+        self.extra: dict[str, dict[tuple[int, int], tuple[NDArray[np.float64], str]]] = {
+            BEARING: {}, CMD_TURN: {}}
         self.conditions: list[tuple[tuple[int, int], str, str]] = []
 
-    def where(self, connection, index: int) -> str:
+    def where(self, connection: Connection, index: int) -> str:
         return f'{self.path} {self.topic[connection.id]} message {index}'
 
-    def add(self, connection, msg) -> None:
+    def add(self, connection: Connection, msg: Any) -> None:
         role = self.role[connection.id]
         index = self.count[role]
         self.count[role] += 1
@@ -211,7 +221,9 @@ class _Parsed:
     def channels(self) -> int:
         if self.manifest is None:
             raise ValueError(f'light comes before the {MANIFEST} message')
-        return self.manifest.get('channels', 8)
+        # not checked to be an int: a manifest's 8.0 or '8' fails later as a bare TypeError
+        channels: int = self.manifest.get('channels', 8)
+        return channels
 
     def recording(self) -> Recording:
         if self.manifest is None:
@@ -226,7 +238,8 @@ class _Parsed:
             direction=np.full(n, np.nan), power=np.full(n, np.nan), manifest=self.manifest)
         row = {k: i for i, (k, _, _) in enumerate(self.light)}
         light_topic = next(t for i, t in self.topic.items() if self.role[i] == LIGHT)
-        where = (lambda i: f'{self.path} {light_topic} message {self.light[i][2]}')
+        where: Callable[[int], str] = (
+            lambda i: f'{self.path} {light_topic} message {self.light[i][2]}')
         check_sequence(rec, where, str(self.path), MANIFEST)
         self._join(rec, row)
         rec.condition = rec.condition.astype(str)
@@ -235,7 +248,7 @@ class _Parsed:
             raise RecordingError(f'{where(bad[0])}: {bad[1]}')
         return rec
 
-    def _join(self, rec: Recording, row: dict) -> None:
+    def _join(self, rec: Recording, row: dict[tuple[int, int], int]) -> None:
         """Bearings, commands and conditions onto the light rows, by (episode, step)."""
         for role, values in self.extra.items():
             for key, (value, where) in values.items():
@@ -246,7 +259,7 @@ class _Parsed:
                     rec.heading_deg[row[key]] = value[0]
                 else:
                     rec.direction[row[key]], rec.power[row[key]] = value
-        starts = []
+        starts: list[tuple[int, str]] = []
         for key, label, where in self.conditions:
             if key not in row:
                 raise RecordingError(f'{where}: (episode {key[0]}, step {key[1]}) has no '
@@ -272,7 +285,8 @@ def _condition(text: str) -> tuple[tuple[int, int], str]:
     return key, label
 
 
-def _unpack(msg, width: int, by_column: bool = False) -> tuple[tuple[int, int], np.ndarray]:
+def _unpack(msg: Any, width: int, by_column: bool = False
+            ) -> tuple[tuple[int, int], NDArray[np.float64]]:
     """((episode, step), values (1, width)) after checking the layout against the data.
 
     ``by_column`` (light): the layout is (width, 1 robot), as the live topic has it; for one

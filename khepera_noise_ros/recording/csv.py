@@ -4,23 +4,24 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
+from typing import Any, Callable, SupportsFloat
 
 import numpy as np
 import yaml
 
-from ..files import atomic_open, atomic_write_text
+from ..files import StrPath, atomic_open, atomic_write_text
 from .model import (COLUMNS, KHEPERA_CHANNELS, Recording, RecordingError, check_manifest,
                     check_sequence, columns, dump_manifest, finish_manifest, first_bad_row)
 
 
-def paths(path) -> tuple[Path, Path]:
+def paths(path: StrPath) -> tuple[Path, Path]:
     """(NAME.csv, NAME.yaml) for NAME, NAME.csv or NAME.yaml."""
     path = Path(path)
     stem = path.with_suffix('') if path.suffix in ('.csv', '.yaml') else path
     return stem.with_name(stem.name + '.csv'), stem.with_name(stem.name + '.yaml')
 
 
-def write_csv(rec: Recording, path) -> tuple[Path, Path]:
+def write_csv(rec: Recording, path: StrPath) -> tuple[Path, Path]:
     """Write NAME.csv and NAME.yaml; returns their paths."""
     rec.check()
     csv_path, yaml_path = paths(path)
@@ -37,7 +38,7 @@ def write_csv(rec: Recording, path) -> tuple[Path, Path]:
     return csv_path, yaml_path
 
 
-def _cell(value) -> str:
+def _cell(value: SupportsFloat) -> str:
     """A number as the shortest text that reads back exactly; empty for NaN."""
     value = float(value)
     if math.isnan(value):
@@ -47,8 +48,9 @@ def _cell(value) -> str:
     return repr(value)
 
 
-def read_manifest(path) -> dict:
-    """The YAML manifest, or a RecordingError with the file and line."""
+def read_manifest(path: StrPath) -> Any:
+    """The YAML manifest (not yet checked: ``check_manifest`` does), or a RecordingError
+    with the file and line."""
     path = Path(path)
     try:
         manifest = yaml.safe_load(path.read_text())
@@ -61,7 +63,7 @@ def read_manifest(path) -> dict:
     return manifest
 
 
-def read_csv(path) -> Recording:
+def read_csv(path: StrPath) -> Recording:
     """Read NAME.csv with NAME.yaml (NAME, NAME.csv or NAME.yaml may be given)."""
     csv_path, yaml_path = paths(path)
     for p in (csv_path, yaml_path):
@@ -77,7 +79,8 @@ def read_csv(path) -> Recording:
                 check_manifest(manifest, channels)
             except ValueError as exc:
                 raise RecordingError(f'{yaml_path}: {exc}') from None
-            lines, rows = [], []
+            lines: list[int] = []
+            rows: list[tuple[float | str, ...]] = []
             for row in reader:
                 lines.append(reader.line_num)
                 rows.append(_parse_row(f'{csv_path} line {reader.line_num}', row, channels))
@@ -86,7 +89,7 @@ def read_csv(path) -> Recording:
     except csv.Error as exc:
         raise RecordingError(f'{csv_path} line {reader.line_num}: {exc}') from None
     rec = _assemble(rows, channels, manifest)
-    where = (lambda i: f'{csv_path} line {lines[i]}')
+    where: Callable[[int], str] = (lambda i: f'{csv_path} line {lines[i]}')
     bad = first_bad_row(rec)
     if bad:
         raise RecordingError(f'{where(bad[0])}: {bad[1]}')
@@ -105,7 +108,7 @@ def _read_header(path: Path, header: list[str] | None) -> int:
     return channels
 
 
-def _parse_row(where: str, row: list[str], channels: int) -> tuple:
+def _parse_row(where: str, row: list[str], channels: int) -> tuple[float | str, ...]:
     names = columns(channels)
     if len(row) != len(names):
         raise RecordingError(f'{where}: expected {len(names)} columns, got {len(row)}')
@@ -130,7 +133,8 @@ def _number(name: str, text: str, integer: bool = False) -> float:
     return value
 
 
-def _assemble(rows: list[tuple], channels: int, manifest: dict) -> Recording:
+def _assemble(rows: list[tuple[float | str, ...]], channels: int, manifest: dict[str, Any]
+              ) -> Recording:
     table = np.array([r[:3] + r[4:] for r in rows], np.float64).reshape(len(rows), channels + 5)
     return Recording(
         episode=table[:, 0].astype(np.int64), step=table[:, 1].astype(np.int64),

@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeGuard
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from ..core.task import Trace
 
 FORMAT = 'khepera-noise-recording/1'
 KHEPERA_CHANNELS = 8
@@ -30,14 +35,14 @@ def columns(channels: int = KHEPERA_CHANNELS) -> tuple[str, ...]:
 class Recording:
     """Samples of C light channels (8 for a Khepera); NaN where a value is not known."""
 
-    episode: np.ndarray        # (N,) int
-    step: np.ndarray           # (N,) int
-    heading_deg: np.ndarray    # (N,) float, NaN where unknown (closed loop on hardware)
-    condition: np.ndarray      # (N,) str, keys of manifest['conditions']
-    readings: np.ndarray       # (N, C) float, 0 brightest .. 525 darkest on a Khepera
-    direction: np.ndarray      # (N,) float, -1 left / +1 right, NaN in stationary data
-    power: np.ndarray          # (N,) float, 0..9, NaN in stationary data
-    manifest: dict = field(default_factory=dict)
+    episode: NDArray[np.integer[Any]]       # (N,) int
+    step: NDArray[np.integer[Any]]          # (N,) int
+    heading_deg: NDArray[np.float64]        # (N,) NaN where unknown (closed loop on hardware)
+    condition: NDArray[Any]                 # (N,) str, keys of manifest['conditions']
+    readings: NDArray[np.float64]           # (N, C), 0 brightest .. 525 darkest on a Khepera
+    direction: NDArray[np.float64]          # (N,) -1 left / +1 right, NaN in stationary data
+    power: NDArray[np.float64]              # (N,) 0..9, NaN in stationary data
+    manifest: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.episode.size)
@@ -51,7 +56,7 @@ class Recording:
         """Channels that carry data: the manifest's ``channels_used``, else all."""
         return list(self.manifest.get('channels_used', range(self.channels)))
 
-    def select(self, mask: np.ndarray) -> 'Recording':
+    def select(self, mask: NDArray[Any]) -> 'Recording':
         """The rows where ``mask`` is true, with the same manifest."""
         return Recording(self.episode[mask], self.step[mask], self.heading_deg[mask],
                          self.condition[mask], self.readings[mask], self.direction[mask],
@@ -70,7 +75,7 @@ class Recording:
         keys = self.episode.astype(np.int64) * (1 << 32) + self.step.astype(np.int64)
         unique, counts = np.unique(keys, return_counts=True)
         duplicated = [_split(k) for k in unique[counts > 1]]
-        lost = []
+        lost: list[tuple[int, int]] = []
         for e in np.unique(self.episode):
             seen = set(self.step[self.episode == e].tolist())
             lost += [(int(e), s) for s in range(max(seen) + 1) if s not in seen]
@@ -94,16 +99,17 @@ class Recording:
             raise RecordingError(f'sample {bad[0]}: {bad[1]}')
 
 
-def from_trace(trace, condition: str, manifest: dict, first_episode: int = 0,
-               stationary: bool = False) -> Recording:
+def from_trace(trace: Trace, condition: str, manifest: dict[str, Any],
+               first_episode: int = 0, stationary: bool = False) -> Recording:
     """Rows from a core ``Trace`` (arrays (steps, B, ...)): robot b is episode first + b.
 
     ``stationary`` leaves direction and power empty, as the format asks of
     recordings in which the robot did not act.
     """
     steps, robots = trace.power.shape
-    by_robot = (lambda a: np.swapaxes(np.asarray(a, np.float64), 0, 1)
-                .reshape(robots * steps, *np.shape(a)[2:]))
+    by_robot: Callable[[NDArray[Any]], NDArray[np.float64]] = (
+        lambda a: np.swapaxes(np.asarray(a, np.float64), 0, 1)
+        .reshape(robots * steps, *np.shape(a)[2:]))
     empty = np.full(robots * steps, np.nan)
     return Recording(
         episode=np.repeat(np.arange(robots) + first_episode, steps),
@@ -113,7 +119,8 @@ def from_trace(trace, condition: str, manifest: dict, first_episode: int = 0,
         power=empty if stationary else by_robot(trace.power), manifest=manifest)
 
 
-def concatenate(recordings: list[Recording], manifest: dict | None = None) -> Recording:
+def concatenate(recordings: list[Recording], manifest: dict[str, Any] | None = None
+                ) -> Recording:
     """One recording from several, in order; the manifest's conditions are merged."""
     if not recordings:
         raise ValueError('nothing to concatenate')
@@ -121,7 +128,8 @@ def concatenate(recordings: list[Recording], manifest: dict | None = None) -> Re
         manifest = dict(recordings[0].manifest)
         manifest['conditions'] = {k: v for r in recordings
                                   for k, v in r.manifest.get('conditions', {}).items()}
-    join = (lambda name: np.concatenate([getattr(r, name) for r in recordings]))
+    join: Callable[[str], NDArray[Any]] = (
+        lambda name: np.concatenate([getattr(r, name) for r in recordings]))
     return Recording(join('episode'), join('step'), join('heading_deg'), join('condition'),
                      join('readings'), join('direction'), join('power'), manifest)
 
@@ -132,7 +140,7 @@ def _split(key: int) -> tuple[int, int]:
 
 # -- manifest -----------------------------------------------------------------------------
 
-def check_manifest(manifest: dict, channels: int, in_file: bool = True) -> None:
+def check_manifest(manifest: object, channels: int, in_file: bool = True) -> None:
     """Raise ValueError naming the first manifest key that breaks the format.
 
     In a file, any channel count but 8 must be declared; in memory the data says it.
@@ -178,7 +186,7 @@ def check_manifest(manifest: dict, channels: int, in_file: bool = True) -> None:
         raise ValueError(f'reading_range must be [low, high] with low < high, got {[low, high]}')
 
 
-def reading_range(manifest: dict, channels: int) -> tuple[float, float]:
+def reading_range(manifest: Mapping[str, Any], channels: int) -> tuple[float, float]:
     """Allowed readings: the manifest's ``reading_range``, else 0..525 on a Khepera."""
     if 'reading_range' in manifest:
         value = manifest['reading_range']
@@ -188,12 +196,12 @@ def reading_range(manifest: dict, channels: int) -> tuple[float, float]:
     return KHEPERA_RANGE if channels == KHEPERA_CHANNELS else (-math.inf, math.inf)
 
 
-def _is_number(value) -> bool:
+def _is_number(value: object) -> TypeGuard[float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool) \
         and math.isfinite(value)
 
 
-def finish_manifest(rec: Recording) -> dict:
+def finish_manifest(rec: Recording) -> dict[str, Any]:
     """The manifest to write: the given keys plus channels, samples and lost steps.
 
     Lost steps are the gaps in the data plus any the recorder declared (steps lost
@@ -216,11 +224,11 @@ def _pairs(pairs: list[tuple[int, int]], limit: int = 5) -> str:
     return text + (f' and {len(pairs) - limit} more' if len(pairs) > limit else '')
 
 
-def dump_manifest(manifest: dict) -> str:
+def dump_manifest(manifest: Mapping[str, Any]) -> str:
     return yaml.safe_dump(_plain(manifest), sort_keys=False, default_flow_style=None)
 
 
-def _plain(value):
+def _plain(value: object) -> object:
     """numpy scalars and tuples to YAML-safe Python values."""
     if isinstance(value, dict):
         return {str(k): _plain(v) for k, v in value.items()}
@@ -239,7 +247,8 @@ def first_bad_row(rec: Recording) -> tuple[int, str] | None:
     low, high = reading_range(manifest, rec.channels)
     used = rec.readings[:, rec.channels_used]
     known = ~np.isnan(rec.direction)
-    checks = (
+    # (the mask of bad rows, the problem in row i)
+    checks: tuple[tuple[np.bool_ | NDArray[np.bool_], Callable[[int], str]], ...] = (
         ((rec.episode < 0) | (rec.step < 0),
          lambda i: f'episode and step must be >= 0, got {rec.episode[i]}, {rec.step[i]}'),
         (~np.isin(rec.condition, list(manifest['conditions'])),
@@ -271,7 +280,8 @@ def _bad_reading(rec: Recording, i: int, low: float, high: float) -> str:
     return 'bad reading'
 
 
-def check_sequence(rec: Recording, where, name: str, manifest_name) -> None:
+def check_sequence(rec: Recording, where: Callable[[int], str], name: str,
+                   manifest_name: str) -> None:
     """Every (episode, step) once, in order within its episode, as the manifest declares.
 
     ``where(i)`` names sample i (a line or a message) in errors.

@@ -4,7 +4,7 @@
     python -m khepera_noise_ros.tools.param_docs --check    # exit 1 if it is out of date
 
 The tables say exactly what ``ros2 param describe`` says, so they cannot drift
-from the code: test/test_docs.py fails when the committed page differs.
+from the code: test/project/test_docs.py fails when the committed page differs.
 """
 from __future__ import annotations
 

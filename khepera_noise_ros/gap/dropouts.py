@@ -1,0 +1,313 @@
+"""Dropouts: isolated readings at a sensor's lowest or highest value, far from their
+neighbours, marked and repaired before any other statistic (the light's level read
+instead); their shares, and the count test that judges rare counts against the replays."""
+from __future__ import annotations
+
+import warnings
+from collections import Counter
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..effects.base import AnyArray, Array, Key
+
+ENDS = ('to the lowest reading', 'to the highest reading')
+AWAY, SPREADS, STEADY = 10.0, 6.0, 2.0
+NEAR = (-2, -1, 1, 2)            # the neighbours whose median is the local level
+WINDOW = tuple(k for k in range(-8, 9) if k)   # a quick robust sd first (cheaper) ...
+QUICK = 0.75                     # ... rules out, with a margin, what the run's sd would
+ISOLATED = 3                     # of the four neighbours, at most one at the same extreme
+STRETCHED = 0.25                 # readings at a value next to each other this often: a limit
+DETACHED_HITS, DETACHED, SPACINGS = 3, 3.0, 10
+MIN_HITS, DROP_Z, MAX_RATE = 3, 4.0, 0.5
+COUNT_SAMPLES, MAX_COPIES, KNOWN, EVENTS = 48_000, 20, 20, 2
+
+
+class Runs:
+    """The runs (of 3 samples or more) a dropout is judged in, as positions run by run."""
+
+    def __init__(self, runs: list[np.ndarray], samples: int):
+        kept = [r for r in runs if r.size >= 3]
+        self.order = np.concatenate(kept) if kept else np.zeros(0, np.int64)
+        self.sizes = np.array([r.size for r in kept], np.int64)
+        self.first = np.cumsum(np.r_[0, self.sizes[:-1]]).astype(np.int64)
+        self.run_of = np.repeat(np.arange(len(kept)), self.sizes)
+        self.place = np.full(samples, -1)
+        self.place[self.order] = np.arange(self.order.size)
+
+
+def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray, Array]:
+    """(``x`` with each dropout read as a neighbour's level, (N, C, 2) marks at the lowest
+    and highest value, (C, 2) extremes); ``moving``: the light moves within a run."""
+    marks = np.zeros(x.shape + (2,), np.float32)
+    xt = np.ascontiguousarray(x.T)        # channel by channel: far faster than by column
+    ends = _extremes(xt)
+    if not runs.order.size or x.size == 0:
+        return x, marks, ends
+    xo = xt[:, runs.order].astype(np.float64)
+    # every channel's readings at its extremes, position by position within (channel, end)
+    found = [(2 * k + end, runs.place[np.flatnonzero(xt[k] == ends[k, end])])
+             for k in range(x.shape[1]) for end in (0, 1)]
+    group = np.concatenate([np.full(i.size, g) for g, i in found])
+    at = np.concatenate([i for _, i in found])
+    keep = at >= 0
+    group, at = group[keep], at[keep]
+    order = np.lexsort((at, group))
+    group, at = group[order], at[order]
+    if moving:             # a value held for stretches is a limit the light reaches
+        held = {int(g) for g in np.unique(group) if _stretched(at[group == g], runs.run_of)}
+        keep = ~np.isin(group, list(held))
+        group, at = group[keep], at[keep]
+    keep = ~_flanked(at, runs.run_of, group)
+    group, at = group[keep], at[keep]
+    if not at.size:
+        return x, marks, ends
+    far, lower, d, alone = _local(xo, at, group // 2, runs)
+    repaired, deviations = x, {}
+    for g in np.unique(group[far | alone]):
+        mine = group == g
+        k, end = divmod(int(g), 2)
+        i, f, low, dist, apart = at[mine], far[mine], lower[mine], d[mine], alone[mine]
+        if (apart & ~f).any() and _detached(xt[k], end):
+            f = apart             # beyond the noise's reach: isolated and away suffices
+        elif f.any():
+            if k not in deviations:
+                dev = np.abs(xo[k] - _median4(xo[k], _neighbours(runs, NEAR)))
+                deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
+            scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[f]]))
+            f[f] = dist[f] >= SPREADS * scale[runs.run_of[i[f]]]
+        if f.any():
+            if repaired is x:
+                repaired = x.copy()
+            marks[runs.order[i[f]], k, end] = 1.0
+            repaired[runs.order[i[f]], k] = low[f]
+    return repaired, marks, ends
+
+
+def _extremes(xt: Array) -> Array:
+    """(C, 2) each row's least and greatest finite value."""
+    if not np.isnan(xt).any():
+        return np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1)
+    with np.errstate(invalid='ignore'), warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)         # a channel all NaN
+        return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1)
+
+
+def _local(xo: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, ...]:
+    """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
+    readings at positions ``i`` of channels ``k`` (rows of ``xo``)."""
+    value = xo[k, i]
+    around = xo[k, _neighbours(runs, NEAR, i)]
+    around = np.where(around == value[None, :], np.nan, around)
+    count = np.isfinite(around).sum(axis=0)
+    kept = np.sort(around, axis=0)                              # NaN sorts last
+    cols = np.arange(i.size)
+    lower = kept[np.maximum(count - 1, 0) // 2, cols]
+    level = 0.5 * (lower + kept[np.minimum(count // 2, 3), cols])
+    d = np.abs(value - level)
+    with warnings.catch_warnings(), np.errstate(invalid='ignore'):
+        warnings.simplefilter('ignore', RuntimeWarning)        # none left: not isolated
+        rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
+        alone = (count >= ISOLATED) & (d >= AWAY)
+        far = alone & (d >= STEADY * rough)
+    if far.any():
+        near = xo[k[far], _neighbours(runs, WINDOW, i[far])]
+        spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
+        far[far] = d[far] >= QUICK * SPREADS * spread
+    return far, lower, d, alone
+
+
+def _neighbours(runs: Runs, offsets: tuple[int, ...],
+                at: np.ndarray | None = None) -> np.ndarray:
+    """(offsets, N) each position's neighbours in its run (reflected at its ends)."""
+    at = np.arange(runs.run_of.size) if at is None else at
+    start, n = runs.first[runs.run_of[at]], runs.sizes[runs.run_of[at]]
+    j = (at - start)[None, :] + np.array(offsets)[:, None]
+    j = np.where(j < 0, -j, j)
+    j = np.where(j >= n, 2 * (n - 1) - j, j)
+    out: np.ndarray = start + np.clip(j, 0, n - 1)
+    return out
+
+
+def _median4(col: Array, neighbours: np.ndarray) -> Array:
+    """The median of four neighbours (their sum less the extremes, halved)."""
+    v = col[neighbours]
+    out: Array = 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0))
+    return out
+
+
+def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
+    """Per ``wanted`` run (others inf): the robust sd of its deviations."""
+    out = np.full(runs.sizes.size, np.inf)
+    for r in wanted:
+        out[r] = 1.4826 * np.median(deviations[runs.first[r]:runs.first[r] + runs.sizes[r]])
+    return out
+
+
+def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
+    """Are positions ``i[j]`` and ``i[j + 1]`` consecutive samples of one run (and group)?"""
+    out: np.ndarray = (np.diff(i) == 1) & (run_of[i[1:]] == run_of[i[:-1]])
+    return out if group is None else out & (group[1:] == group[:-1])
+
+
+def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
+    """Do the readings at a value come in stretches (a limit the light holds)?"""
+    pair = _adjacent(i, run_of)
+    beside = np.zeros(i.size, bool)
+    beside[1:] |= pair
+    beside[:-1] |= pair
+    return bool(beside.sum() > STRETCHED * i.size)
+
+
+def _flanked(i: np.ndarray, run_of: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """Readings whose two neighbours in the run are at the value too: never isolated."""
+    pair = _adjacent(i, run_of, group)
+    both = np.zeros(i.size, bool)
+    both[1:-1] = pair[:-1] & pair[1:]
+    return both
+
+
+def _detached(col: Array, end: int) -> bool:
+    """Does the extreme value stand apart from the next values inward, beyond the noise?"""
+    x = col[np.isfinite(col)]
+    x = x if end == 0 else -x
+    low = x.min()
+    rest = x[x > low]
+    if rest.size < SPACINGS + 1 or rest.min() - low < AWAY or \
+            np.count_nonzero(x == low) < DETACHED_HITS:
+        return False
+    m = min(rest.size, 64 * (SPACINGS + 1))     # the distinct values among the nearest m
+    near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
+    if near.size < 3:
+        return False
+    gap = near[0] - low
+    return bool(gap >= AWAY and gap >= DETACHED * np.diff(near).max())
+
+
+def shares(channels: Sequence[int], share: Array) -> list[Array]:
+    """Dropout shares (R, C, 2) per sensor and end, and pooled over the sensors."""
+    cols = []
+    for j in range(len(ENDS)):
+        cols.append(share[:, :, j])
+        if len(channels) > 1:
+            cols.append(share[:, :, j].mean(axis=1)[:, None])
+    return cols
+
+
+def share_keys(family: str, channels: tuple[int, ...], condition: str | None) -> list[Key]:
+    out = []
+    for end in ENDS:
+        out += [Key(family, (sensor,), condition, end) for sensor in channels]
+        if len(channels) > 1:
+            out.append(Key(family, channels, condition, end))
+    return out
+
+
+# -- rare counts -----------------------------------------------------------------------
+
+def counts(recordings: Sequence[Any]) -> dict[Key, list[float]]:
+    """{Key: [count, readings]} of the dropout statistics of repaired recordings."""
+    out: dict[Key, list[float]] = {}
+    for r in recordings:
+        rec, marks = r.recording, r.marks
+        if r.kind == 'closed_loop':
+            family, channels = 'closed_loop_dropout', tuple(range(min(8, marks.shape[1])))
+            groups: list[tuple[str | None, Any]] = [
+                (str(c), rec.condition == c) for c in np.unique(rec.condition)]
+        else:
+            family, channels = 'dropout', tuple(rec.channels_used)
+            groups = [(None, np.ones(len(rec), bool))]
+        for condition, rows in groups:
+            hit = marks[rows].sum(axis=0)[list(channels)]
+            n = float(np.count_nonzero(rows))
+            values = np.concatenate([c[0] for c in shares(channels, hit[None] / n)])
+            for key, value in zip(share_keys(family, channels, condition), values):
+                width = len(channels) if len(key.sensors) > 1 else 1
+                total = out.setdefault(key, [0.0, 0.0])
+                total[0] += float(value) * n * width
+                total[1] += n * width
+    for v in out.values():
+        v[0] = float(np.round(v[0]))
+    return out
+
+
+def count_copies(samples: int, copies: int) -> int:
+    """Copies simulated for the counts: enough for ``COUNT_SAMPLES`` readings."""
+    n = max(samples, 1)
+    if n * copies >= COUNT_SAMPLES / 2:
+        return copies
+    return int(max(copies, min(MAX_COPIES, np.ceil(COUNT_SAMPLES / n))))
+
+
+def undecided(real: dict[Key, list[float]], sim: dict[Key, list[float]]) -> bool:
+    """``EVENTS`` or more real events beside fewer than ``KNOWN`` simulated ones?"""
+    return any(r >= EVENTS and sim[key][0] < KNOWN for key, (r, _) in real.items() if key in sim)
+
+
+def dropouts(real: Sequence[Any], sim: Sequence[Any]) -> dict[int, tuple[float, float]]:
+    """{sensor: (value, rate)} with more dropouts than the replays ``sim`` (alone or pooled
+    with sensors dropping out to the same value)."""
+    if not real:
+        return {}
+    sensors = list(real[0].recording.channels_used)
+    c = len(sensors)
+    hits, total = np.zeros((c, 2)), np.zeros(c)
+    expected, var = np.zeros((c, 2)), np.zeros((c, 2))
+    votes = [[Counter[float](), Counter[float]()] for _ in sensors]
+    for i, r in enumerate(real):
+        h, n, values = _marked(r, sensors)
+        hits += h
+        total += n
+        for k, v in enumerate(values):
+            for end in (0, 1):
+                if h[k, end]:
+                    votes[k][end][float(v[end])] += h[k, end]
+        if i < len(sim):
+            hs, ns, _ = _marked(sim[i], sensors)
+            copies = max(1.0, ns.max() / max(n.max(), 1.0))
+            with np.errstate(invalid='ignore', divide='ignore'):
+                e = np.where(ns[:, None] > 0, hs / ns[:, None] * n[:, None], 0.0)
+            expected += e
+            var += e + 1.0 / copies           # Poisson, and the simulator's own count
+    out: dict[int, tuple[float, float]] = {}
+    for end in (0, 1):
+        excess = hits[:, end] - expected[:, end]
+        alone = (hits[:, end] >= MIN_HITS) & (excess > DROP_Z * np.sqrt(var[:, end]))
+        for k in map(int, np.flatnonzero(alone)):
+            rate = float(excess[k] / total[k])
+            if sensors[k] not in out or rate > out[sensors[k]][1]:
+                out[sensors[k]] = (votes[k][end].most_common(1)[0][0], rate)
+        by_value: dict[float, list[int]] = {}
+        for k in map(int, np.flatnonzero(hits[:, end] > 0)):
+            by_value.setdefault(votes[k][end].most_common(1)[0][0], []).append(k)
+        for value, ks in by_value.items():
+            if hits[ks, end].sum() >= MIN_HITS and len(ks) > 1 and \
+                    excess[ks].sum() > DROP_Z * np.sqrt(var[ks, end].sum()):
+                rate = float(excess[ks].sum() / total[ks].sum())
+                for k in ks:
+                    out.setdefault(sensors[k], (value, rate))
+    return out
+
+
+def seen_share(repaired: Sequence[Any], sensors: Sequence[int]) -> float:
+    """The share of dropouts marked among the ``sensors``' readings."""
+    hits = total = 0.0
+    for r in repaired:
+        h, n, _ = _marked(r, list(r.recording.channels_used))
+        used = [list(r.recording.channels_used).index(s) for s in sensors]
+        hits += h[used].sum()
+        total += n[used].sum()
+    return hits / max(total, 1.0)
+
+
+def _marked(r: Any, sensors: list[int]) -> tuple[Array, Array, list[tuple[float, float]]]:
+    """(hits (C, 2), readings (C,), [(low, high)] per sensor) of a repaired recording."""
+    counted = np.isfinite(r.recording.readings[:, sensors]).sum(axis=0).astype(np.float64)
+    return r.marks[:, sensors].sum(axis=0), counted, [tuple(r.ends[s]) for s in sensors]
+
+
+def rescaled_rate(rate: float, real_share: float, sim_share: float) -> float:
+    """A dropout rate scaled by the real over the simulated share seen."""
+    if sim_share <= 0:
+        return rate
+    return round(float(np.clip(rate * real_share / sim_share, rate, MAX_RATE)), 5)

@@ -1,0 +1,147 @@
+"""The forward selection's rules (``gap.select``) on made-up comparisons.
+
+A step judged on the part of the statistics it acts on (``part_step``): held-out
+comparisons shaped as the benchmark's rejected dropouts were, a large stationary part
+the step does not touch, whose paired replicates move with the simulator's own noise,
+beside a small dropout part the step removes entirely.  And the backfit, which weighs
+only a refit that differs from the effect it had.
+"""
+import numpy as np
+
+from khepera_noise_ros.effects import SensorGainOffset, SensorLatency
+from khepera_noise_ros.effects.base import Candidate, Key
+from khepera_noise_ros.gap import select
+from khepera_noise_ros.gap.compare import Comparison
+from khepera_noise_ros.gap.target import Target
+from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
+
+STATIONARY = [Key('level', (i % 8,), f'c{i}', None) for i in range(40)]
+DROPOUT = [Key('dropout', (s,), 'low', None) for s in (1, 4)]
+VALUES = [Key('loop_granularity', (s,), 'task', None) for s in (2, 3)]
+KEYS = STATIONARY + DROPOUT + VALUES
+N = len(STATIONARY)
+SE = np.r_[np.ones(N), np.full(len(DROPOUT), 0.001), np.full(len(VALUES), 0.01)]
+
+
+class Named:
+    """An effect as the selection's rules see it: its name."""
+
+    def __init__(self, name):
+        self.name = name
+
+
+class FakeTarget:
+    """What the selection asks of a ``Target``: the real data's bootstrap replicates
+    against a comparison's simulated side, comparisons with the chosen effects (the
+    simulated side moves with the simulator's seed), and a copy on another seed."""
+
+    def __init__(self, real, reps, sims, seed=0):
+        self.real, self.reps, self.sims, self.seed = real, reps, sims, seed
+
+    def compare(self, effects=(), replicates=None):
+        sim = self.sims[self.seed][len(effects)]
+        return Comparison(list(KEYS), self.real, sim, SE, (self.real - sim) / SE)
+
+    def replicate_discrepancies(self, c):
+        index = [KEYS.index(k) for k in c.keys]
+        z = (self.reps[:, index] - c.sim[None]) / c.se[None]
+        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+
+    def with_seed(self, seed):
+        return FakeTarget(self.real, self.reps, self.sims, seed)
+
+
+def _target(dropout_after=0.0, worse=0.0, confirm=True, seed=3):
+    """Before the step: the stationary levels at z 4 (discrepancy 160), the dropouts at
+    z 5.3 (22), the loop's value statistics at z 0.  The step moves half the simulated
+    levels to the other side of the real ones at the same distance (the simulator's own
+    noise: the same discrepancy, noisy paired replicates), leaves ``dropout_after`` of
+    the dropouts' z and moves the value statistics to z ``worse``."""
+    rng = np.random.default_rng(seed)
+    real = np.r_[rng.normal(100.0, 5.0, N), [0.008, 0.008], [0.5, 0.5]]
+    reps = real + rng.normal(0.0, 1.0, (200, len(KEYS))) * SE
+    z_none = np.r_[np.full(N, 4.0), np.full(2, 5.3), np.zeros(2)]
+    flip = np.r_[np.where(np.arange(N) < N // 2, -4.0, 4.0), np.zeros(4)]
+    sims = {}
+    for s in (0, select.CONFIRM_SEED):
+        z_after = np.r_[flip[:N], np.full(2, dropout_after), np.full(2, worse)]
+        if s and not confirm:               # on the second seed the step leaves them
+            z_after[N:N + 2] = 5.3
+        none = real - z_none * SE
+        sims[s] = {0: none, 1: none, 2: real - z_after * SE}
+    return FakeTarget(real, reps, sims)
+
+
+def _judge(b):
+    chosen = [Named('sensor_latency')]
+    effects = chosen + [Named('saturation_quantization')]
+    first = current = b.compare(chosen)
+    after = b.compare(effects)
+    reps = b.replicate_discrepancies(current)
+    selection = select.Selection(None, b, first, first.discrepancy)
+    return selection.judge(current, reps, chosen, effects, after, current.discrepancy)
+
+
+def test_a_step_that_removes_a_small_part_counts_by_that_part():
+    """The dropouts' 22 removed while the stationary 160 moves with the simulator's
+    noise: the overall paired p fails, the dropout part's own passes."""
+    b = _target()
+    rule, _, p, added = _judge(b)
+    assert p >= select.STEP_ALPHA          # the whole-comparison rules never get past this
+    assert added >= select.MIN_ADDED
+    assert rule == 'part: dropout'
+
+
+def test_a_part_step_must_not_move_another_part_away():
+    assert _judge(_target())[0] == 'part: dropout'
+    # the same dropouts removed while the loop's value statistics move to z 4
+    b = _target(worse=4.0)
+    after = b.compare([1, 2])
+    assert after.discrepancy < b.compare([1]).discrepancy     # the total still falls
+    assert _judge(b)[0] == ''
+
+
+def test_a_part_step_must_remove_a_share_of_the_part_and_be_confirmed():
+    assert _judge(_target())[0] == 'part: dropout'
+    # a sliver of the dropouts' discrepancy (z 5.3 -> 5.2): too small a share
+    assert _judge(_target(dropout_after=5.2))[0] == ''
+    # the second simulator seed does not see it
+    assert _judge(_target(confirm=False))[0] == ''
+
+
+def test_the_parts_p_is_corrected_for_the_parts_tried(monkeypatch):
+    b = _target()
+    first = current = b.compare([1])
+    after = b.compare([1, 2])
+    assert select.part_step(b, first, current, after) == 'dropout'
+    monkeypatch.setattr(select, 'STEP_ALPHA', 1e-3)
+    # 200 replicates: p is at least 1/201, above 1e-3 / 2 parts
+    assert select.part_step(b, first, current, after) == ''
+
+
+def test_backfit_does_not_weigh_a_refit_that_is_the_effect_it_had(monkeypatch):
+    rec = recorded(stationary_protocol(samples=10))
+    a = Target([rec], CONFIG, seed=1)
+    chosen = [SensorGainOffset((0,), (1.1,), (2.0,)), SensorLatency((1,), 1)]
+    calls = []
+    monkeypatch.setattr(select, 'fit_one', lambda name, given, c: Candidate(
+        name, next(e for e in chosen if e.name == name), 'same'))
+    monkeypatch.setattr(Target, 'objective',
+                        lambda self, effects=(), **kw: calls.append(effects) or 0.0)
+    selection = select.Selection(a, None, None, 1.0)
+    assert selection.backfit(chosen) == chosen
+    assert calls == []
+    # a refit that differs is weighed: both objectives are asked for
+    changed = SensorGainOffset((0,), (1.2,), (2.0,))
+    monkeypatch.setattr(select, 'fit_one', lambda name, given, c: Candidate(name, changed, ''))
+    selection.backfit(chosen)
+    assert len(calls) == 2
+
+
+def test_the_simpler_effect_is_as_good_within_the_tie_or_unbeaten():
+    rng = np.random.default_rng(0)
+    best = rng.normal(100.0, 5.0, 200)
+    assert select.as_good(100.0, best, 100.0 * (1 + select.TIE), best + 50.0, 0.05)
+    assert not select.as_good(100.0, best, 150.0, best + 50.0, 0.05)
+    assert select.as_good(100.0, best, 150.0, best + rng.normal(0.0, 50.0, 200), 0.05)
+    assert select.free('correlated_noise') < select.free('intensity_dependent_noise')
