@@ -62,10 +62,9 @@ EXAMPLES = [
 ]
 # the lamp's narrower light on s1 and s2 at the task's knots every 10 degrees
 KNOTS = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
-NARROW = LightResponse((1, 2), KNOTS, (5.0,), (500.0,), tuple(np.round(np.concatenate([
-    500.0 - 430.0 * np.exp(-np.log(2) * (np.abs((np.array(KNOTS) - axis + 180.0) % 360.0
-                                                 - 180.0) / 25.0) ** 2)
-    for axis in (45.0, 10.0)]), 2)))
+OFF = [np.abs((np.array(KNOTS) - axis + 180.0) % 360.0 - 180.0) for axis in (45.0, 10.0)]
+NARROW = LightResponse((1, 2), KNOTS, (5.0,), (500.0,), tuple(np.round(np.concatenate(
+    [500.0 - 430.0 * np.exp(-np.log(2) * (d / 25.0) ** 2) for d in OFF]), 2)))
 
 
 def _id(effect: Effect) -> str:
