@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import glob
 import json
 import os
 import shutil
@@ -85,6 +86,17 @@ def atomic_open(path: StrPath, mode: str = 'w', fsync: bool = True,
         if refused(exc) and not isinstance(exc, WriteError):
             raise WriteError(path, exc) from None
         raise
+
+
+def remove_leftovers(path: StrPath) -> int:
+    """Remove the temporaries ``atomic_open`` left beside ``path`` when its writer was
+    killed mid-write (SIGKILL runs no cleanup); only for a path with one writer."""
+    path = Path(path)
+    removed = 0
+    for tmp in path.parent.glob(f'.{glob.escape(path.name)}.*.tmp'):
+        tmp.unlink(missing_ok=True)
+        removed += 1
+    return removed
 
 
 def atomic_write_text(path: StrPath, text: str) -> Path:

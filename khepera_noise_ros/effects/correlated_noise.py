@@ -102,7 +102,7 @@ def groups_of(evidence: Evidence, z: Array, part: str = 'fast') -> list[list[int
     in where the evidence is wide (a threshold below ``THRESHOLD`` let the emulated
     robot's flicker merge every sensor and its drift go unseen)."""
     c = z.shape[0]
-    if c < 2:
+    if c < 2 or not (z > THRESHOLD).any():       # no link could count: the null is not needed
         return []
     null = evidence.group_null(part)
     off = ~np.eye(c, dtype=bool)

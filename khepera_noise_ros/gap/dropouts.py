@@ -34,6 +34,14 @@ class Runs:
         self.run_of = np.repeat(np.arange(len(kept)), self.sizes)
         self.place = np.full(samples, -1)
         self.place[self.order] = np.arange(self.order.size)
+        self._near: np.ndarray | None = None
+
+    @property
+    def near(self) -> np.ndarray:
+        """(4, N) the samples that are every position's ``NEAR`` neighbours, made once."""
+        if self._near is None:
+            self._near = self.order[_neighbours(self, NEAR)]
+        return self._near
 
 
 def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray, Array]:
@@ -44,7 +52,7 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     ends = _extremes(xt)
     if not runs.order.size or x.size == 0:
         return x, marks, ends
-    xo = xt[:, runs.order].astype(np.float64)
+    xt = xt.astype(np.float64, copy=False)
     # every channel's readings at its extremes, position by position within (channel, end)
     found = [(2 * k + end, runs.place[np.flatnonzero(xt[k] == ends[k, end])])
              for k in range(x.shape[1]) for end in (0, 1)]
@@ -62,7 +70,7 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     group, at = group[keep], at[keep]
     if not at.size:
         return x, marks, ends
-    far, lower, d, alone = _local(xo, at, group // 2, runs)
+    far, lower, d, alone = _local(xt, at, group // 2, runs)
     repaired, deviations = x, {}
     for g in np.unique(group[far | alone]):
         mine = group == g
@@ -72,7 +80,7 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
             f = apart             # beyond the noise's reach: isolated and away suffices
         elif f.any():
             if k not in deviations:
-                dev = np.abs(xo[k] - _median4(xo[k], _neighbours(runs, NEAR)))
+                dev = np.abs(xt[k, runs.order] - _median4(xt[k], runs.near))
                 deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
             scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[f]]))
             f[f] = dist[f] >= SPREADS * scale[runs.run_of[i[f]]]
@@ -93,11 +101,11 @@ def _extremes(xt: Array) -> Array:
         return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1)
 
 
-def _local(xo: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, ...]:
+def _local(xt: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, ...]:
     """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
-    readings at positions ``i`` of channels ``k`` (rows of ``xo``)."""
-    value = xo[k, i]
-    around = xo[k, _neighbours(runs, NEAR, i)]
+    readings at positions ``i`` of channels ``k`` (rows of ``xt``)."""
+    value = xt[k, runs.order[i]]
+    around = xt[k, runs.near[:, i]]
     around = np.where(around == value[None, :], np.nan, around)
     count = np.isfinite(around).sum(axis=0)
     kept = np.sort(around, axis=0)                              # NaN sorts last
@@ -111,7 +119,7 @@ def _local(xo: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, .
         alone = (count >= ISOLATED) & (d >= AWAY)
         far = alone & (d >= STEADY * rough)
     if far.any():
-        near = xo[k[far], _neighbours(runs, WINDOW, i[far])]
+        near = xt[k[far], runs.order[_neighbours(runs, WINDOW, i[far])]]
         spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
         far[far] = d[far] >= QUICK * SPREADS * spread
     return far, lower, d, alone

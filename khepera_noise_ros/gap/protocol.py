@@ -28,10 +28,20 @@ def kind(rec: Recording) -> str:
     return 'closed_loop' if np.isfinite(rec.direction).any() else 'stationary'
 
 
+def labels(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(values, return_inverse=True)`` of a label column that changes seldom (the
+    lighting conditions): the labels of its stretches sorted, not every string."""
+    if values.size == 0:
+        return np.unique(values, return_inverse=True)
+    start = np.flatnonzero(np.r_[True, values[1:] != values[:-1]])
+    ordered, code = np.unique(values[start], return_inverse=True)
+    return ordered, np.repeat(code.ravel(), np.diff(np.r_[start, values.size]))
+
+
 def runs(rec: Recording) -> list[np.ndarray]:
     """Sample indices of each (episode, condition, heading) run, in step order."""
     heading = np.nan_to_num(np.round(rec.heading_deg, 1), nan=1e9)
-    _, cond = np.unique(rec.condition, return_inverse=True)
+    _, cond = labels(rec.condition)
     order = np.lexsort((rec.step, heading, cond, rec.episode))
     key = np.stack([rec.episode[order], cond[order], heading[order]], axis=1)
     edges = np.flatnonzero((np.diff(key, axis=0) != 0).any(axis=1)) + 1

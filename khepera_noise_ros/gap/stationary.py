@@ -11,6 +11,7 @@ from scipy import sparse
 from ..effects.base import AnyArray, Array, Key
 from ..recording import Recording
 from . import bootstrap
+from . import protocol
 
 LAGS = (1, 3)
 STEP_LAGS = 3
@@ -21,7 +22,7 @@ MIN_OWN = 3               # channels the own part needs (the others' mean of two
 def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
     """(labels in order of first appearance, cell of each sample)."""
     heading = np.round(rec.heading_deg, 1)
-    conditions, cond = np.unique(rec.condition, return_inverse=True)
+    conditions, cond = protocol.labels(rec.condition)
     pairs = np.stack([cond, np.where(np.isfinite(heading), heading, np.inf)], axis=1)
     unique, first, index = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..files import write_json
+from ..files import remove_leftovers, write_json
 
 FORMAT = 'khepera-noise-evolution-checkpoint/1'
 Evaluate = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -117,4 +117,6 @@ class Checkpoint:
                                'batches': self.batches})
 
     def remove(self) -> None:
+        """The finished run's checkpoint, and any temporary a killed writer left beside it."""
         self.path.unlink(missing_ok=True)
+        remove_leftovers(self.path)

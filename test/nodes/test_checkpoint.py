@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from khepera_noise_ros.nodes.checkpoint import FORMAT
+from khepera_noise_ros.nodes.checkpoint import FORMAT, Checkpoint
 from khepera_noise_ros.nodes.controller import Controller
 from khepera_noise_ros.nodes.local_graph import local_graph
 from khepera_noise_ros.nodes.runtime import events_executor, spinning
@@ -157,3 +157,15 @@ def test_the_manager_killed_by_sigkill_mid_run_resumes_with_no_generation_lost(
     assert f"resuming from checkpoint {checkpoint}: generation {killed_at['generation']}" in err
     assert not checkpoint.exists()
     assert np.isfinite(record['wall_time_s'])
+
+
+def test_a_finished_run_removes_the_temporary_a_killed_writer_left(tmp_path):
+    path = tmp_path / 'run.checkpoint.json'
+    checkpoint = Checkpoint(path, {'seed': 1})
+    checkpoint.save(generation=3)
+    orphan = tmp_path / '.run.checkpoint.json.k1ll3d.tmp'    # as a SIGKILL mid-write leaves it
+    orphan.write_text('{"format": ')
+    other = tmp_path / '.results.json.abc.tmp'               # another file's: not ours to remove
+    other.write_text('')
+    checkpoint.remove()
+    assert not path.exists() and not orphan.exists() and other.exists()
