@@ -89,6 +89,11 @@ def loop(name: str, shared: dict, args, out: Path, tell=None) -> dict:
     genome = shared['stock'][0]                 # the recording's controller: a stock best
     recordings = [inprocess.stationary(one, seed=args.seed),
                   inprocess.closed_loop(one, genome, episodes=40, seed=args.seed + 1000)]
+    if args.identify:           # the protocols that identify the world (identify.py)
+        import identify
+        world = world_of(name, 1, 0)
+        recordings[:1] = [identify.sweep(world, args.seed),
+                          identify.turn_calibration(world, args.seed + 2000)]
     tell(name, STAGES[0])
     spent = {'record': time.process_time() - cpu}
     config = simconfig.SimConfig()
@@ -166,6 +171,9 @@ def main(argv=None) -> int:
     p.add_argument('--diagnoses', type=Path, default=Path('results/transfer_loop'),
                    help="each robot's diagnosis.json and fitted params")
     p.add_argument('--no-progress', action='store_true')
+    p.add_argument('--identify', action='store_true',
+                   help='record the heading sweep and the turn calibration (record '
+                        '--protocol sweep / turns) instead of section 2\'s placements')
     args = p.parse_args(argv)
     from foreign.cli import benchmark_robots
     names = args.robots or ['emulator'] + benchmark_robots()
