@@ -5,8 +5,9 @@ different to the right and to the left, optionally a scale per commanded size (a
 over degrees), and scatter (a share of the turn made, and degrees per turn).  With
 ``knocks`` the task's heading knocks go through the same wheels.  The fit: executed
 turns where they are measured (tracked headings, or the turn-calibration protocol) by
-least squares; else the closed loop's turn statistics through the simulator.  A
-response that is a plain scale defers to ``actuator_turn_error``.
+least squares.  Without measured turns it is not fitted: the closed loop's statistics
+alone confound its form with the noise, and the turn error there is
+``actuator_turn_error``'s.  A response that is a plain scale defers to it too.
 """
 from __future__ import annotations
 
@@ -18,13 +19,11 @@ from scipy import stats as sps
 from scipy.optimize import nnls
 
 from .base import Array, Candidate, Effect, Evidence, Stage, Step, param
-from .fitting import ALPHA, CLOSED_LOOP, golden, present
+from .fitting import ALPHA, CLOSED_LOOP
 
 BANDS = np.round(np.arange(0.0, 8.0001, 0.1), 1)     # dead-bands tried, degrees
 MIN_TURNS = 20                                         # measured turns a direct fit needs
-FORM = 0.25           # share of the plain scale's objective the form must remove (closed loop)
-GRID_BANDS, GRID_SIDES = (0.0, 2.0, 4.0, 6.0), (-0.3, 0.0, 0.3)    # the closed loop's start
-GRID_GAINS = (0.9, 1.1, 1.3)          # times the plain scale: a dead-band needs more gain
+TINY = 1e-9           # weighted squared residual per turn below which a fit gains nothing
 
 
 @dataclass(frozen=True)
@@ -90,12 +89,13 @@ class ActuatorResponse(Effect):
                                              'record --protocol turns to measure the turns')
         turns = evidence.turns()
         turns = turns[np.isfinite(turns).all(axis=1) & (turns[:, 0] != 0)]
-        if len(turns) >= MIN_TURNS:
-            effect, plain = _direct(turns)
-            how = f'{len(turns)} turns measured'
-        else:
-            effect, plain = _through_loop(evidence)
-            how = 'the closed loop\'s turn statistics (no turns measured)'
+        if len(turns) < MIN_TURNS:
+            return Candidate(cls.name, None, f'{len(turns)} turns measured (needs {MIN_TURNS}): '
+                                             'record --protocol turns, or a robot that reports '
+                                             'its heading; the closed loop\'s turn error is '
+                                             'actuator_turn_error\'s')
+        effect, plain = _direct(turns)
+        how = f'{len(turns)} turns measured'
         if plain:
             return Candidate(cls.name, None, f'{how}: a plain scale of the turn '
                                              f'(actuator_turn_error\'s case)')
@@ -152,11 +152,13 @@ def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
             ratio.append(round(float(np.clip(r, 0.0, 5.0)), 4))
             rss_table += float((w[g] * (e[g] - r * m) ** 2).sum())
         dof = n - 3 - sizes.size
-        if dof > 0 and rss_table > 0:
-            p_size = float(sps.f.sf(((rss - rss_table) / sizes.size) / (rss_table / dof),
+        if dof > 0 and rss - rss_table > TINY * n:
+            f = ((rss - rss_table) / sizes.size) / max(rss_table / dof, TINY)
+            p_size = float(sps.f.sf(f,
                                     sizes.size, dof))
     dof = max(n - 3, 1)
-    p_form = float(sps.f.sf(((rss0 - rss) / 2) / (rss / dof), 2, dof)) if rss > 0 else 0.0
+    p_form = float(sps.f.sf(((rss0 - rss) / 2) / max(rss / dof, TINY), 2, dof)) \
+        if rss0 - rss > TINY * n else 1.0
     table = (tuple(float(x) for x in sizes), tuple(ratio)) if p_size < ALPHA else ((), ())
     made = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table).mean(c)
     scatter, jitter = _scatter(made, e - made)
@@ -169,27 +171,3 @@ def _scatter(made: Array, residual: Array) -> tuple[float, float]:
     """(share, degrees): residual variance = share^2 made^2 + degrees^2, non-negative."""
     coef, _ = nnls(np.stack([made ** 2, np.ones_like(made)], axis=1), residual ** 2)
     return round(float(np.sqrt(coef[0])), 4), round(float(np.sqrt(coef[1])), 3)
-
-
-def _through_loop(evidence: Evidence) -> tuple[ActuatorResponse, bool]:
-    """Dead-band, asymmetry and gain on the closed loop's statistics (a grid, then
-    golden-section search of each in turn); ``plain`` when the dead-band and the sides
-    remove less than ``FORM`` of what the plain scale leaves."""
-    kinds = present(evidence, (CLOSED_LOOP,))
-    families = evidence.families() - evidence.families('closed_loop_noise')
-
-    def objective(band: float, gain: float, asym: float) -> float:
-        return evidence.objective([ActuatorResponse(round(band, 2), round(gain, 4),
-                                                    round(asym, 4))], kinds, families)
-    scale = golden(lambda g: objective(0.0, g, 0.0), 0.5, 1.6, 7)
-    # the dead-band and the sides move the same statistics: a coarse grid of both first,
-    # then each refined in turn
-    band, gain, asym = min(((b, scale * g, a) for b in GRID_BANDS for g in GRID_GAINS
-                            for a in GRID_SIDES), key=lambda p: objective(*p))
-    for _ in range(2):
-        band = golden(lambda b: objective(b, gain, asym), max(0.0, band - 1.5), band + 1.5, 5)
-        asym = golden(lambda a: objective(band, gain, a), max(-0.9, asym - 0.15),
-                      min(0.9, asym + 0.15), 5)
-        gain = golden(lambda g: objective(band, g, asym), gain * 0.85, gain * 1.2, 5)
-    plain = objective(band, gain, asym) >= (1 - FORM) * objective(0.0, scale, 0.0)
-    return ActuatorResponse(round(band, 2), round(gain, 4), round(asym, 4)), plain

@@ -5,7 +5,8 @@ knot bearing, interpolated round the circle (Akima's local cubic from four knots
 linear below), replacing the world's response of the sensors it names; or, where the
 bearings were too few for a shape (``between='model'``), the world's response plus the
 difference interpolated linearly.  The fit: the real levels at the recorded headings
-(``level``), on the sensors whose levels no line through the model's explains.
+(``level``), on the sensors whose levels no line through the model's explains, where a
+sweep gives bearings enough for a shape (else a shape would be a guess).
 """
 from __future__ import annotations
 
@@ -113,7 +114,12 @@ class LightResponse(Effect):
         # a shape needs bearings enough wherever the lamp lights some sensor differently
         sparse = [c for c in conditions if len(seen[c]) < SPARSE
                   and np.ptp(stock[c][located], axis=1).max() > 1.0]
-        at = np.rint(np.mod(bearings, 360.0) * 10).astype(int) % TENTHS
+        if sparse:          # a shape is not guessed: the levels are a calibration's to fit
+            text = '; '.join(f'{c}: {len(seen[c])}' for c in sparse)
+            return Candidate(cls.name, None, f'levels of {names(located)} differ in shape from '
+                                             f'the light model, but the bearings are too few '
+                                             f'for a shape (needs {SPARSE}; {text}): record '
+                                             f'--protocol sweep')
         values: list[float] = []
         for cond in conditions:
             for s in located:       # the model's light corrected by what the robot read
@@ -122,22 +128,13 @@ class LightResponse(Effect):
                               if c == cond and k == s)
                 knots = np.array([h for h, _ in mine])
                 v = np.array([x for _, x in mine])
-                if sparse:
-                    own = stock[cond][s, np.rint(np.mod(knots, 360.0) * 10).astype(int) % TENTHS]
-                    tabled = stock[cond][s, at] + np.interp(
-                        np.mod(bearings, 360.0), np.mod(knots, 360.0), v - own, period=360.0)
-                else:
-                    tabled = around(bearings, knots, v)
-                values += [round(float(x), 2) for x in tabled]
+                values += [round(float(x), 2) for x in around(bearings, knots, v)]
         effect = cls(tuple(located), tuple(float(b) for b in bearings),
                      tuple(float(worlds[c].lamp_distance_mm) for c in conditions),
-                     tuple(float(worlds[c].ambient) for c in conditions), tuple(values),
-                     'model' if sparse else 'level')
+                     tuple(float(worlds[c].ambient) for c in conditions), tuple(values))
         text = '; '.join(f'{c}: ' + ', '.join(f'{b:g}' for b in seen[c]) for c in conditions)
-        guess = f'; between so few bearings in {", ".join(sparse)} the model\'s shape is ' \
-            f'kept: record --protocol sweep' if sparse else ''
         return Candidate(cls.name, effect, f'levels of {names(located)} differ in shape from '
-                                           f'the light model; bearings seen (deg) {text}{guess}')
+                                           f'the light model; bearings seen (deg) {text}')
 
 
 def around(x: Array, knots: Array, values: Array) -> Array:

@@ -5,7 +5,8 @@ samples) then a first-order lag (a fraction ``rate`` of the way per sample, its 
 towards bright and towards dark); whole-step ``sensor_latency`` is the case of a whole
 delay and rate 1.  The fit: the step response after a change of heading (stationary
 ``step_response``, ``turn_step_response`` of rests after a turn) by least squares on
-its analytic form, else the closed loop's turn responses through the simulator.
+its analytic form.  A delay seen only in the closed loop is ``sensor_latency``'s: there
+the turn responses alone confound a lag with the turn made.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from typing import ClassVar
 import numpy as np
 
 from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, columns, param, rows
-from .fitting import CLOSED_LOOP, Z_DETECT, golden, names, present
+from .fitting import Z_DETECT, names
 
 DELAYS = np.round(np.arange(0.0, 3.0001, 0.05), 2)
 RATES = np.round(np.arange(0.05, 1.0001, 0.05), 2)
@@ -95,24 +96,21 @@ class SensorResponse(Effect):
     def fit(cls, evidence: Evidence) -> Candidate:
         steps = evidence.rows('step_response') + evidence.rows('turn_step_response')
         slow = sorted({r.key.sensors[0] for r in steps if r.z > Z_DETECT})
-        if slow:
-            delay, bright, dark = _analytic([r for r in steps if r.key.sensors[0] in slow])
-            how = 'step responses' + (' after turns' if steps[-1].key.family.startswith(
-                'turn') else ' after changes of heading')
-            # sensors whose responses agree with the fit are taken to share it; those
-            # nobody could time too, when every one that could be timed does
-            timed = {r.key.sensors[0] for r in steps}
-            slow = sorted(set(slow) | (timed - _faster(steps, delay, bright, dark)))
-            if set(slow) >= timed:
-                slow = sorted(set(slow) | set(evidence.channels))
-        else:
-            turned = {r.key.sensors[0] for r in evidence.rows('sensor_turn_response')
-                      if abs(r.z) > Z_DETECT}
-            if not turned:
-                return Candidate(cls.name, None, 'readings follow heading changes at once')
-            slow = sorted(turned | set(evidence.delayed_sensors()))
-            delay, bright, dark = _through_loop(evidence, tuple(slow))
-            how = 'turn responses in the closed loop'
+        if not slow:
+            turned = any(abs(r.z) > Z_DETECT for r in evidence.rows('sensor_turn_response'))
+            return Candidate(cls.name, None, 'no step response slower than simulated (changes '
+                                             'of heading, or record --protocol turns)' + (
+                                                 '; the delay the closed loop shows is '
+                                                 'sensor_latency\'s' if turned else ''))
+        delay, bright, dark = _analytic([r for r in steps if r.key.sensors[0] in slow])
+        how = 'step responses' + (' after turns' if steps[-1].key.family.startswith(
+            'turn') else ' after changes of heading')
+        # sensors whose responses agree with the fit are taken to share it; those
+        # nobody could time too, when every one that could be timed does
+        timed = {r.key.sensors[0] for r in steps}
+        slow = sorted(set(slow) | (timed - _faster(steps, delay, bright, dark)))
+        if set(slow) >= timed:
+            slow = sorted(set(slow) | set(evidence.channels))
         if min(bright, dark) >= 1.0 and delay >= 1 - WHOLE and \
                 abs(delay - round(delay)) <= WHOLE:
             return Candidate(cls.name, None, f'{how}: a whole-step delay of {round(delay)} '
@@ -174,19 +172,3 @@ def _faster(steps: list[Row], delay: float, bright: float, dark: float) -> set[i
         if abs(r.real - model) > Z_DETECT * max(r.se, 0.01):
             out.add(r.key.sensors[0])
     return out
-
-
-def _through_loop(evidence: Evidence, sensors: tuple[int, ...]) -> tuple[float, float, float]:
-    """(delay, rate, rate) searched through the simulator on the closed loop's statistics
-    other than its noise."""
-    kinds = present(evidence, (CLOSED_LOOP,))
-    families = evidence.families() - evidence.families('closed_loop_noise')
-
-    def objective(delay: float, rate: float) -> float:
-        return evidence.objective([SensorResponse(sensors, round(delay, 3), round(rate, 3),
-                                                  round(rate, 3))], kinds, families)
-    delay = golden(lambda d: objective(d, 1.0), 0.0, 2.0, 8)
-    rate = golden(lambda k: objective(delay, k), 0.15, 1.0, 7)
-    if objective(delay, 1.0) <= objective(delay, rate):
-        rate = 1.0
-    return round(delay, 2), round(rate, 2), round(rate, 2)

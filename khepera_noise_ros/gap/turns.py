@@ -117,6 +117,8 @@ def stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], lis
                 if family == 'turn_by_command':
                     keys.append(Key('turn_by_command_scatter', (), c, part))
                     cols.append(sd[:, j])
+        if not b.has('tc_dd'):
+            return keys, cols
         dd, d2 = b.part(s, 'tc_dd')[:, i], b.part(s, 'tc_d2')[:, i]
         n = b.part(s, 'tc_n')[0, i]
         for side, label in enumerate(SIDES):
@@ -141,6 +143,10 @@ def with_stats(more: Part) -> Part:
 
 def sums(rec: Recording, x: Array, every: int, more: Callable[..., dict[str, Any]]
          ) -> Callable[[np.ndarray, np.ndarray, int], dict[str, Array]]:
-    """``more``'s per-episode sums followed by the turn sums (``closedloop.blocks``)."""
+    """``more``'s per-episode sums followed by the turn sums (``closedloop.blocks``) of a
+    turn calibration; a controller's episodes keep their statistics (its turns are few
+    per command and tied to what it saw)."""
+    if rec.manifest.get('calibration') != 'turns':
+        return more
     return lambda order, ep, m: {**more(order, ep, m),
                                  **loop_sums(rec, x, order, ep, m, knock_every(rec, every))}

@@ -87,13 +87,15 @@ FIT_CASES = {
     'saturation_quantization': FitCase(SaturationQuantization((0, 5), 0.0, 450.0, 4.0), False,
                                        {'high': (450.0, 4.0), 'step': (4.0, 0)}),
     'empirical_noise': FitCase(HUMP, False, {}),
-    # the protocols of the contract: 8 headings (the shape between them is the model's),
-    # the closed loop without headings (the turn is seen in the readings alone)
-    'light_response': FitCase(NARROW, False, {'between': ('model', 0)}),
+    # their own protocols: a heading sweep every 10 degrees, the closed loop with its
+    # headings (the turns measured)
+    'light_response': FitCase(NARROW, False, {'sensors': ((1, 2), 0), 'between': ('level', 0)},
+                              sweep=10.0),
     'sensor_response': FitCase(SensorResponse(tuple(range(8)), 0.0, 0.4, 0.4), False,
                                {'delay': (0.0, 0.15), 'rate_bright': (0.4, 0.1)}),
     'actuator_response': FitCase(ActuatorResponse(3.0, 0.9, 0.25), True,
-                                 {'asymmetry': (0.25, 0.1)}),
+                                 {'dead_band': (3.0, 0.3), 'gain': (0.9, 0.05),
+                                  'asymmetry': (0.25, 0.05)}, tracked=True),
 }
 
 

@@ -19,58 +19,12 @@ from khepera_noise_ros.effects.simulate import EffectEpisodes, light_table
 from khepera_noise_ros.gap.protocol import kind
 from khepera_noise_ros.gap.replay import Replayer
 from khepera_noise_ros.gap.target import Target
-from khepera_noise_ros.recording import FORMAT, Recording
+from khepera_noise_ros.recording import Recording
+from khepera_noise_ros.testing.protocols import sweep, turn_calibration
 from khepera_noise_ros import simconfig
 
 CONFIG = simconfig.SimConfig(noise=NoiseModel.independent_only(0.02))
-CONDITIONS = {'task': {'lamp_distance_mm': 5.0, 'ambient': 500.0},
-              'bulb_2ft': {'lamp_distance_mm': 130.0, 'ambient': 500.0},
-              'room_fluorescent': {'lamp_distance_mm': 1e4, 'ambient': 250.0}}
 KNOTS = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
-
-
-def manifest(protocol: str, conditions: dict, **extra) -> dict:
-    return {'format': FORMAT, 'source': 'simulator', 'sample_period_s': 1.0,
-            'protocol': protocol, 'conditions': dict(conditions), **extra}
-
-
-def sweep(step: float = 20.0, samples: int = 20, within: bool = False) -> Recording:
-    """Placements every ``step`` degrees where the lamp is on (one heading where it is
-    off): one episode each as the record command does, or (``within``) one episode per
-    condition turned from heading to heading without a pause."""
-    rows, episode = [], 0
-    for label, world in CONDITIONS.items():
-        heads = np.arange(-180.0, 180.0, step) if world['lamp_distance_mm'] < 1e3 else [0.0]
-        t = 0
-        for h in heads:
-            rows += [(episode, t + i, h, label) for i in range(samples)]
-            t, episode = (t + samples, episode) if within else (0, episode + 1)
-        episode += within
-    e, s, h, c = (np.array(v) for v in zip(*rows))
-    n = len(rows)
-    return Recording(e, s, h.astype(float), c, np.zeros((n, 8)), np.full(n, np.nan),
-                     np.full(n, np.nan), manifest('stationary', CONDITIONS))
-
-
-def turn_calibration(repeats: int = 3, rest: int = 10) -> Recording:
-    """Per power and repeat a placement, then 4 turns of that power right and left in
-    turn, each after ``rest`` readings at rest (the record command's protocol)."""
-    rows, episode = [], 0
-    for _ in range(repeats):
-        for power in range(1, 10):
-            for t in range(rest * 5):
-                k = (t + 1) // rest - 1
-                turn = (t + 1) % rest == 0 and k < 4
-                rows.append((episode, t, -power * 1.5 if t == 0 else np.nan, 'turns_task',
-                             (1 if k % 2 == 0 else -1) if turn else 1, power if turn else 0))
-            episode += 1
-    e, s, h, c, d, p = (np.array(v) for v in zip(*rows))
-    n = len(rows)
-    return Recording(e, s, h.astype(float), c, np.zeros((n, 8)), d.astype(float),
-                     p.astype(float), manifest(
-                         'closed_loop', {'turns_task': CONDITIONS['task']},
-                         calibration='turns', task={'steps': rest * 5, 'perturb_every': 5,
-                                                    'perturbation_deg': 0.0}))
 
 
 def recorded(protocol: Recording, effects=(), seed: int = 5, tracked: bool = True
@@ -247,20 +201,11 @@ def test_the_plain_simulator_gives_none_and_missing_protocols_are_named():
     for cls in (LightResponse, SensorResponse):
         assert fitted(cls, plain).effect is None
     cand = fitted(LightResponse, [recorded(sweep(step=45.0, samples=20), [NARROW])])
-    assert cand.effect is not None and 'record --protocol sweep' in cand.note
+    assert cand.effect is None and 'record --protocol sweep' in cand.note
 
 
-def test_with_few_bearings_the_table_keeps_the_world_s_shape_between_them():
+def test_with_too_few_bearings_for_a_shape_no_table_is_made_and_the_sweep_is_named():
+    """Section 2's few headings cannot show a shape: the levels are left to the effects
+    that need no shape (a calibration), and the note names the protocol that would."""
     cand = fitted(LightResponse, [recorded(sweep(step=90.0, samples=30), [NARROW])])
-    effect = cand.effect
-    assert isinstance(effect, LightResponse) and effect.between == 'model', cand.note
-    assert "the model's shape is kept: record --protocol sweep" in cand.note
-    table, own = light_table(World(), [effect]), light_table(World())
-    knots = np.rint(np.mod(effect.bearings, 360.0) * 10).astype(int) % TENTHS
-    truth = light_table(World(), [NARROW])
-    np.testing.assert_allclose(table[1:3, knots], truth[1:3, knots], atol=4.0)
-    # between the knots the difference to the world is linear: the world's shape stays
-    bend = np.abs(np.diff(table[1] - own[1], 2))           # at grid points 1 .. TENTHS - 2
-    away = np.ones(TENTHS - 2, bool)
-    away[np.clip(knots - 1, 0, TENTHS - 3)] = False
-    assert bend[away].max() < 1e-3 and bend[~away].max() > 1e-3
+    assert cand.effect is None and 'record --protocol sweep' in cand.note, cand.note
