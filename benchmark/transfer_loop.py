@@ -2,6 +2,7 @@
 
     python benchmark/transfer_loop.py [ROBOT ...] [--trials 10] [--test-episodes 10]
         [--jobs 2] [--seed 26] [--out benchmark/transfer_loop.json] [--no-progress]
+        [--protocols identify|section2]
 
 ROBOT is ``emulator`` (the emulated robot, config/emulator.yaml) or a foreign robot
 (benchmark/foreign/robots, docs/foreign-robots.md); the default is the emulator and the
@@ -9,9 +10,11 @@ foreign robots that pass the learnability rule.  For each robot, in this process
 core backend, no ROS), what a user with the robot attached runs
 (docs/transfer.md):
 
-1. record the section-2 stationary protocol (4 conditions x 5 headings x 60 samples) and
-   40 closed-loop episodes driven by a controller from the stock simulator, one robot,
-   one episode after another (``reality.record``, as ``khepera-noise record``);
+1. record the heading sweep (4 conditions, every 10 degrees, two passes), the turn
+   calibration and 40 closed-loop episodes driven by a controller from the stock
+   simulator, one robot, one episode after another (as ``khepera-noise record --protocol
+   sweep / turns / closed_loop``; ``--protocols section2``: section 2's placements, 4
+   conditions x 5 headings x 60 samples, instead of the first two);
 2. diagnose them with the defaults of ``khepera-noise diagnose`` and write its outputs;
 3. the transfer experiment of ``diagnose --transfer-emulator`` with the ceiling
    (``experiment.transfer``): stock, independent, combination, diagnosed and
@@ -89,6 +92,11 @@ def loop(name: str, shared: dict, args, out: Path, tell=None) -> dict:
     genome = shared['stock'][0]                 # the recording's controller: a stock best
     recordings = [inprocess.stationary(one, seed=args.seed),
                   inprocess.closed_loop(one, genome, episodes=40, seed=args.seed + 1000)]
+    if args.protocols == 'identify':    # the protocols that identify the world (identify.py)
+        import identify
+        world = world_of(name, 1, 0)
+        recordings[:1] = [identify.sweep(world, args.seed),
+                          identify.turn_calibration(world, args.seed + 2000)]
     tell(name, STAGES[0])
     spent = {'record': time.process_time() - cpu}
     config = simconfig.SimConfig()
@@ -166,6 +174,10 @@ def main(argv=None) -> int:
     p.add_argument('--diagnoses', type=Path, default=Path('results/transfer_loop'),
                    help="each robot's diagnosis.json and fitted params")
     p.add_argument('--no-progress', action='store_true')
+    p.add_argument('--protocols', choices=('identify', 'section2'), default='identify',
+                   help='identify: the heading sweep and the turn calibration (record '
+                        '--protocol sweep / turns) beside the closed loop; section2: the '
+                        'paper\'s placements instead (no world identified)')
     args = p.parse_args(argv)
     from foreign.cli import benchmark_robots
     names = args.robots or ['emulator'] + benchmark_robots()
@@ -220,7 +232,8 @@ def main(argv=None) -> int:
           f'{os.cpu_count()} cores; CPU by stage over the robots: '
           + ', '.join(f'{k} {v:.0f} s' for k, v in stages.items()) + ')')
     args.out.write_text(json.dumps({
-        'seed': args.seed, 'trials': args.trials, 'test_episodes': args.test_episodes,
+        'seed': args.seed, 'protocols': args.protocols, 'trials': args.trials,
+        'test_episodes': args.test_episodes,
         'wall_s': elapsed, 'cpu_s': total_cpu, 'jobs': args.jobs, 'summary': summary,
         'robots': results}, indent=1, default=float) + '\n')
     print(f'wrote {args.out}')

@@ -19,7 +19,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from ..effects import NAMES
+from ..effects import DEFAULT
 from .. import simconfig
 from ..experiment import transfer, transfer_report
 from ..experiment import diagnosis_report as report
@@ -43,7 +43,7 @@ def add_arguments(parser) -> None:
     parser.add_argument('--base', choices=BASES, default='auto',
                         help="simulated light levels: the light model at the recorded headings "
                              "(model) or the recording's own means (observed)")
-    parser.add_argument('--effects', nargs='+', choices=NAMES, default=NAMES,
+    parser.add_argument('--effects', nargs='+', choices=DEFAULT, default=DEFAULT,
                         help='candidate effects')
     parser.add_argument('--replicates', type=int, default=200, help='bootstrap replicates')
     parser.add_argument('--seed', type=int, default=0)

@@ -126,8 +126,10 @@ def _simulator_overrides(args) -> list:
 def add_arguments(parser) -> None:
     from . import _options
     parser.add_argument('out', type=Path, help='NAME: writes NAME.csv, NAME.yaml and NAME_bag/')
-    parser.add_argument('--protocol', choices=('stationary', 'closed-loop'),
-                        default='stationary')
+    parser.add_argument('--protocol', choices=('stationary', 'closed-loop', 'sweep', 'turns'),
+                        default='stationary',
+                        help='sweep: stationary placements round the circle (the light '
+                             'response); turns: the turn calibration (docs/identification.md)')
     robot = parser.add_mutually_exclusive_group()
     robot.add_argument('--robot', choices=ROBOTS, default='simulator',
                        help='robot node to start in-process: the simulator, the emulator '
@@ -143,7 +145,12 @@ def add_arguments(parser) -> None:
                         "{label: {lamp_distance_mm: .., ambient: ..}}")
     s.add_argument('--headings', type=float, nargs='+', default=[0.0], metavar='DEG',
                    help='lamp bearings to record at (0 = straight ahead, CCW positive)')
-    s.add_argument('--samples', type=int, default=60, help='samples per condition and heading')
+    s.add_argument('--samples', type=int, default=None,
+                   help='samples per condition and heading (default 60; sweep: 10)')
+    s.add_argument('--sweep-step', type=float, default=10.0, metavar='DEG',
+                   help='sweep: degrees between headings where the lamp is on')
+    s.add_argument('--sweep-passes', type=int, default=2, metavar='N',
+                   help='sweep: times round the circle, each the other way')
     s.add_argument('--period', type=float, default=1.0,
                    help='sample period, s (the paper: 1 s); see --pace')
     s.add_argument('--ask', action='store_true',
@@ -152,7 +159,12 @@ def add_arguments(parser) -> None:
     c.add_argument('--genome', type=Path, help='controller genome (JSON list or evolve result)')
     c.add_argument('--episodes', type=int, default=10)
     c.add_argument('--steps', type=int, default=60, help='steps per episode')
-    c.add_argument('--condition', default='task', help='condition name for closed-loop runs')
+    c.add_argument('--condition', default='task',
+                   help='condition name for closed-loop and turn-calibration runs')
+    c.add_argument('--turn-rest', type=int, default=10, metavar='N',
+                   help='turns: readings at rest before each turn (at least 10)')
+    c.add_argument('--turn-repeats', type=int, default=3, metavar='N',
+                   help='turns: placements per power (each with 2 turns each way)')
     parser.add_argument('--pace', action='store_true',
                         help='answer readings no faster than one per period (for hardware)')
     parser.add_argument('--seed', type=int, default=0, help='episode seeds are seed + episode')
@@ -171,9 +183,17 @@ def run(args) -> int:
         raise UsageError('--attach needs --source (simulator, emulator or hardware)')
     if args.protocol == 'closed-loop' and args.genome is None:
         raise UsageError('the closed-loop protocol needs --genome')
-    for name in ('samples', 'episodes', 'steps'):
+    if args.samples is None:
+        args.samples = 10 if args.protocol == 'sweep' else 60
+    for name in ('samples', 'episodes', 'steps', 'turn_repeats', 'sweep_passes'):
         if getattr(args, name) < 1:
-            raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
+            raise UsageError(f'--{name.replace("_", "-")} must be >= 1, got '
+                             f'{getattr(args, name)}')
+    if args.turn_rest < 10:
+        raise UsageError(f'--turn-rest must be >= 10 (a turn is timed over the readings '
+                         f'around it), got {args.turn_rest}')
+    if not 0 < args.sweep_step <= 180:
+        raise UsageError(f'--sweep-step must be in (0, 180] degrees, got {args.sweep_step}')
     if not args.period > 0:
         raise UsageError(f'--period must be > 0, got {args.period}')
     try:
@@ -265,7 +285,8 @@ def record(args, context=None, robot=None) -> tuple[Recording, dict]:
         params = RobotParameters(node, executor, robot_name, args.timeout)
         recorder.wait_for_robot(executor, args.timeout)
         start_ns = time.time_ns()
-        protocol = _stationary if args.protocol == 'stationary' else _closed_loop
+        protocol = {'stationary': _stationary, 'sweep': _stationary, 'turns': _turns,
+                    'closed-loop': _closed_loop}[args.protocol]
         done = _Episodes()
         session = (lambda: {'start_ns': start_ns, 'resent': recorder.resent,
                             'dropped': dict(recorder.dropped), 'namespace': namespace})
@@ -301,22 +322,32 @@ def _base_manifest(args, params, source: str, protocol: str) -> dict:
 
 
 def _stationary(args, recorder, executor, params, source, done: _Episodes) -> None:
+    from . import _identify
     conditions = parse_conditions(args.conditions)
     manifest = _base_manifest(args, params, source, 'stationary')
-    manifest.update(conditions=conditions, headings_deg=list(args.headings),
-                    samples_per_episode=args.samples)
-    params.set({'perturbation_deg': 0.0, 'steps': args.samples})
-    done.manifest, episode = manifest, 0
-    for label, world in conditions.items():
-        params.set(world)
-        if args.ask:
-            input(f'Set up condition {label} ({world}) and press Enter: ')
-        for heading in args.headings:
-            log = recorder.record_episode(executor, episode, args.seed + episode, args.samples,
-                                          hold_still, heading)
-            done.lost += [[episode, s] for s in log.lost]
-            done.parts.append(log.recording(label, manifest, heading, acted=False))
-            episode += 1
+    if args.protocol == 'sweep':
+        manifest.update(sweep_step_deg=args.sweep_step, sweep_passes=args.sweep_passes)
+
+        def headings(world: dict) -> list:
+            return _identify.sweep_headings(args.sweep_step, world, args.sweep_passes)
+    else:
+        def headings(world: dict) -> list:
+            return list(args.headings)
+    manifest.update(conditions=conditions, samples_per_episode=args.samples, headings_deg=(
+        list(args.headings) if args.protocol == 'stationary' else sorted(
+            {h for w in conditions.values() for h in headings(w)})))
+    _identify.stationary(args, recorder, executor, params, manifest, conditions, headings,
+                         hold_still, done)
+
+
+def _turns(args, recorder, executor, params, source, done: _Episodes) -> None:
+    from . import _identify
+    conditions = named_conditions()
+    if args.condition not in conditions:
+        raise ValueError(f'unknown condition {args.condition!r}; known: {sorted(conditions)}')
+    manifest = _base_manifest(args, params, source, 'closed_loop')
+    _identify.turns(args, recorder, executor, params, manifest, conditions[args.condition],
+                    done)
 
 
 def _closed_loop(args, recorder, executor, params, source, done: _Episodes) -> None:

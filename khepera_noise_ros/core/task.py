@@ -196,7 +196,8 @@ class Episodes:
     def _sense(self) -> np.ndarray:
         draws = self._stream.draw(self.step_index, streams.GROUP.start + len(self.noise.groups))
         if self.step_index % self.task.perturb_every == 0 and self.task.perturbation_deg > 0:
-            self._bearing = self._bearing + knock_tenths(draws[streams.PERTURB], self.task)
+            self._bearing = self._bearing + self._knocked(
+                knock_tenths(draws[streams.PERTURB], self.task))
         if self.step_index % WRAP_EVERY == 0:
             self._bearing %= TENTHS
         # 'wrap' costs a compare per robot where a modulo every step cost a division
@@ -211,6 +212,10 @@ class Episodes:
         readings: np.ndarray = self.noise.apply(base, draws[streams.SENSOR], draws[streams.GROUP],
                                                 out=base).T
         return readings
+
+    def _knocked(self, tenths: np.ndarray) -> np.ndarray:
+        """The knock the robot makes of a drawn one (here: as drawn)."""
+        return tenths
 
     def _light_table(self) -> np.ndarray:
         """The integer table, or the light levels when the noise rounds the reading."""

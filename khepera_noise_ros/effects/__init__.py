@@ -11,27 +11,36 @@ from __future__ import annotations
 import json
 from typing import Any, Iterable
 
+from .actuator_response import ActuatorResponse
 from .actuator_turn_error import ActuatorTurnError
 from .base import Effect, Param, Stage
 from .correlated_noise import CorrelatedNoise
 from .empirical_noise import EmpiricalNoise
 from .intensity_dependent_noise import IntensityDependentNoise
+from .light_response import LightResponse
 from .saturation_quantization import SaturationQuantization
 from .sensor_gain_offset import SensorGainOffset
 from .sensor_latency import SensorLatency
+from .sensor_response import SensorResponse
 from .temporal_drift import TemporalDrift
 
 REGISTRY: dict[str, type[Effect]] = {cls.name: cls for cls in (
     CorrelatedNoise, IntensityDependentNoise, SensorGainOffset, TemporalDrift,
-    ActuatorTurnError, SensorLatency, SaturationQuantization, EmpiricalNoise)}
-# the names the diagnosis looks for; the empirical remainder is fitted to what they leave
-NAMES = tuple(n for n in REGISTRY if n != EmpiricalNoise.name)
+    ActuatorTurnError, SensorLatency, SaturationQuantization, EmpiricalNoise,
+    LightResponse, ActuatorResponse, SensorResponse)}
+# the world model's parts the diagnosis identifies beside the unmodelled effects
+WORLD_MODEL = (LightResponse.name, ActuatorResponse.name, SensorResponse.name)
+# the unmodelled effects (the emulated robot's vocabulary); the empirical remainder is
+# fitted to what the chosen effects leave
+NAMES = tuple(n for n in REGISTRY if n not in (EmpiricalNoise.name,) + WORLD_MODEL)
 VOCABULARY = NAMES + ('none',)
+DEFAULT = NAMES + WORLD_MODEL         # what the diagnosis looks for unless told
 
-__all__ = ['REGISTRY', 'NAMES', 'VOCABULARY', 'Effect', 'Param', 'Stage', 'from_dict',
-           'dumps', 'loads', 'ActuatorTurnError', 'CorrelatedNoise', 'EmpiricalNoise',
-           'IntensityDependentNoise', 'SaturationQuantization', 'SensorGainOffset',
-           'SensorLatency', 'TemporalDrift']
+__all__ = ['REGISTRY', 'NAMES', 'VOCABULARY', 'WORLD_MODEL', 'DEFAULT', 'Effect', 'Param',
+           'Stage', 'from_dict', 'dumps', 'loads', 'ActuatorResponse', 'ActuatorTurnError',
+           'CorrelatedNoise', 'EmpiricalNoise', 'IntensityDependentNoise', 'LightResponse',
+           'SaturationQuantization', 'SensorGainOffset', 'SensorLatency', 'SensorResponse',
+           'TemporalDrift']
 
 
 def from_dict(data: Any) -> Effect:

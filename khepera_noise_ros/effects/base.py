@@ -28,6 +28,7 @@ E = TypeVar('E', bound='Effect')
 class Stage(enum.Enum):
     """Where in the loop an effect acts (as Gymnasium's wrappers: one stage each)."""
 
+    WORLD = 'world'          # the light at each bearing: the (sensors, tenths) table
     LIGHT = 'light'          # the light a sensor sees, before the model's noise
     READING = 'reading'      # the noisy reading: the sensor's timing and its converter
     ACTUATOR = 'turn'        # a commanded rotation, in degrees
@@ -142,6 +143,11 @@ class Effect:
         step = self.start(level.shape[2], level.shape[1], rng)
         return np.stack([step(level[t]) for t in range(level.shape[0])])
 
+    def table(self, table: Array, world: Any) -> Array:
+        """A world-stage effect: the (channels, tenths of a degree) light table of
+        ``world`` (a ``core.khepera.World``, unrounded) as the robot sees it."""
+        raise NotImplementedError
+
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
         """Locate and fit this effect on the evidence of real recordings."""
@@ -223,6 +229,8 @@ class Evidence(Protocol):
     def rescaled_dropout(self, effect: Effect, sensors: Sequence[int]) -> Effect: ...
     def delayed_sensors(self) -> tuple[int, ...]: ...
     def stationary_runs(self, simulated: bool) -> list[Array]: ...
+    def worlds(self) -> dict[str, Any]: ...            # condition label -> its World
+    def turns(self) -> Array: ...      # (n, 2) commanded and executed turns, degrees
 
 
 def rows(sensors: tuple[int, ...], channels: int) -> list[int]:

@@ -16,7 +16,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..core.khepera import DARK, SENSORS, TENTHS, World, to_tenths
+from ..core.khepera import DARK, SENSOR_ANGLES_DEG, SENSORS, TENTHS, World, to_tenths
 from ..core.noise import NoiseModel
 from ..core.streams import UNIT
 from ..core.task import Episodes, Task
@@ -44,7 +44,33 @@ class EffectEpisodes(Episodes):
         self._light: list[Step] = []
         self._reading: list[Step] = []
         self._turning: list[Step] = []
+        self._knocking: list[Step] = []
         super().__init__(world, noise, task)
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        return self._effects
+
+    @effects.setter
+    def effects(self, effects: Sequence[Effect]) -> None:
+        """New effects remake the world's table (world-stage effects act there)."""
+        self._effects = tuple(effects)
+        if hasattr(self, '_world'):
+            self.world = self._world
+
+    @property
+    def world(self) -> World:
+        return self._world
+
+    @world.setter
+    def world(self, world: World) -> None:
+        """The world with its table as the world-stage effects make it."""
+        Episodes.world.fset(self, world)  # type: ignore[attr-defined]
+        if staged(self.effects, Stage.WORLD):
+            self._table = np.ascontiguousarray(
+                light_table(world, self.effects, True).astype(np.float32).T)
+            setattr(self, '_levels', np.ascontiguousarray(
+                light_table(world, self.effects).astype(np.float32).T))
 
     @property
     def task(self) -> Task:
@@ -80,6 +106,8 @@ class EffectEpisodes(Episodes):
                   for stage in Stage} if rng is not None else {stage: [] for stage in Stage}
         self._light, self._reading = starts[Stage.LIGHT], starts[Stage.READING]
         self._turning = starts[Stage.ACTUATOR]
+        self._knocking = [step for e, step in zip(staged(self.effects, Stage.ACTUATOR),
+                                                  self._turning) if wheels_knocks(e)]
         self.noise = self._noise
         out: Array = super().reset(seed, robots, bearing_deg)
         return out
@@ -94,6 +122,38 @@ class EffectEpisodes(Episodes):
             self._bearing = (self._bearing + to_tenths(actual - commanded)) % TENTHS
         out: Array | None = super().step(direction, power)
         return out
+
+    def _knocked(self, tenths: np.ndarray) -> np.ndarray:
+        """A knock made by the wheels of the turn effects that make knocks."""
+        if not self._knocking:
+            return tenths
+        deg = np.asarray(tenths, np.float64) / 10.0
+        for turn in self._knocking:
+            deg = turn(deg)
+        out: np.ndarray = to_tenths(deg)
+        return out
+
+
+def wheels_knocks(effect: Effect) -> bool:
+    """Does ``effect`` make the task's knocks as turns (not by scaling the task)?"""
+    return bool(getattr(type(effect), 'wheel_knocks', False) and getattr(effect, 'knocks', False))
+
+
+def light_table(world: World, effects: Sequence[Effect] = (), rounded: bool = False) -> Array:
+    """(SENSORS, TENTHS) light of ``world`` at every bearing with the world-stage effects
+    (rounded like ``World.light_table`` when ``rounded``)."""
+    own = np.asarray(world.light_table(rounded), np.float64)
+    shaped = staged(effects, Stage.WORLD)
+    if not shaped:
+        return own
+    bearing = np.arange(TENTHS) / 10.0
+    raw = world.response(bearing[None, :] - np.asarray(SENSOR_ANGLES_DEG)[:, None])
+    level: Array = raw
+    for e in shaped:
+        level = e.table(level, world)
+    changed = (level != raw).any(axis=1)       # the other sensors: exactly the world's own
+    own[changed] = np.rint(level[changed]) if rounded else level[changed]
+    return own
 
 
 class EffectNoise:

@@ -9,15 +9,16 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..core.noise import ROUNDINGS
-from ..effects import NAMES, Effect, EmpiricalNoise
+from ..effects import DEFAULT, WORLD_MODEL, Effect, EmpiricalNoise
 from ..effects.base import Array, Candidate
 from ..effects.fitting import ALPHA
 from ..recording import Recording
-from . import allan, bootstrap, split
+from . import allan, bootstrap, identify, split
 from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
-from .select import MIN_REDUCTION, Compound, Selection, as_good, fit_one, free, loop_worse
+from .select import (MIN_ADDED, MIN_REDUCTION, Compound, Selection, as_good, fit_one, free,
+                     loop_worse)
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -37,7 +38,7 @@ class Options:
     reduction_alpha: float = REDUCTION_ALPHA    # one-sided, for "does the effect shrink it"
     min_reduction: float = MIN_REDUCTION
     replicates: int = bootstrap.REPLICATES
-    effects: tuple[str, ...] = NAMES
+    effects: tuple[str, ...] = DEFAULT
     where_limit: int = 40
     compound: bool = True         # forward selection of a set of effects after the best one
     remainder: bool = True        # describe what is left and fit the empirical model
@@ -64,10 +65,17 @@ class Diagnosis:
     empirical: Effect | None = None  # the empirical model, when it brings the simulator closer
     allan: dict[str, Any] | None = None
     rounding: dict[str, Any] | None = None
+    world: identify.World | None = None   # the world model's parts, in the simulator
 
     @property
     def fitted_effects(self) -> list[Effect]:
-        """What fitted_params.yaml loads: the compound set, else the top effect."""
+        """What fitted_params.yaml loads: the world identified, then the compound set (else
+        the top effect)."""
+        return ([] if self.world is None else list(self.world.effects)) + self.named_effects
+
+    @property
+    def named_effects(self) -> list[Effect]:
+        """The effects chosen beside the world: the compound set, else the top effect."""
         if self.compound is not None:
             return list(self.compound.effects)
         return [] if self.fitted is None else [self.fitted]
@@ -86,6 +94,7 @@ class Diagnosis:
                 'localisation': self.localisation,
                 'compound': None if self.compound is None else self.compound.to_json(),
                 'remainder': self.remainder, 'allan': self.allan, 'rounding': self.rounding,
+                'world': None if self.world is None else self.world.to_json(),
                 'notes': self.notes, 'inputs': self.inputs}
 
 
@@ -107,9 +116,9 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     """
     check(recordings)
     o = options
-    unknown = [n for n in o.effects if n not in NAMES]
+    unknown = [n for n in o.effects if n not in DEFAULT]
     if unknown:
-        raise ValueError(f'unknown effect(s) {unknown}; the vocabulary is {list(NAMES)}')
+        raise ValueError(f'unknown effect(s) {unknown}; the vocabulary is {list(DEFAULT)}')
     notes = _base_notes(recordings, o.base)
     full = Target(recordings, o.config, o.seed, o.base, replicates=o.replicates)
     c_full = full.compare()
@@ -131,8 +140,14 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    block_lengths=[full.block_lengths[i] for i, _ in part],
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
+    world = identify.world_model(a, b, b.compare(), o.effects, log) if significant else None
+    if world is not None:         # the simulator identified: its world, then the effects
+        result.world = world
+        notes.append(f'the world identified: {", ".join(e.name for e in world.effects)} '
+                     f'remove {1 - world.after / world.before:.0%} of the held-out discrepancy')
+        a, b = (t.with_config(t.config.with_effects(*world.effects)) for t in (a, b))
     c_a = a.compare()
-    candidates = [fit_one(n, a, c_a) for n in o.effects]
+    candidates = [fit_one(n, a, c_a) for n in o.effects if n not in WORLD_MODEL]
     result.held_out_before = before = b.compare()
     d_before = before.discrepancy
     before_reps = b.replicate_discrepancies(before)
@@ -155,9 +170,11 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
             scored = rank(b)
     result.effects = [s[0] for s in scored]
     best_entry, best_cmp, best_effect, best_reps = scored[0] if scored else (None,) * 4
+    # beside an identified world the effects refine it: the first needs the compound's share
+    least = o.min_reduction if world is None else MIN_ADDED
     if significant and best_entry is not None:
         if best_effect is not None and best_cmp is not None and best_reps is not None and \
-                best_entry['heldout_reduction'] >= o.min_reduction and \
+                best_entry['heldout_reduction'] >= least and \
                 best_entry['p_value'] < o.reduction_alpha and \
                 not best_entry.get('closed_loop_worse'):
             result.top_effect, result.fitted = best_entry['name'], best_effect
@@ -171,7 +188,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
             notes.append(f'no effect explains a significant part of the gap: the best, '
                          f'{best_entry["name"]}, removes {best_entry["heldout_reduction"]:.0%} '
                          f'of the held-out discrepancy, p = {best_entry["p_value"]:.3f} (needs '
-                         f'{o.min_reduction:.0%}, p < {o.reduction_alpha})')
+                         f'{least:.0%}, p < {o.reduction_alpha})')
     if significant and o.remainder:
         _remainder(result, a, b, d_before, o)
     return result
@@ -184,7 +201,7 @@ def _compound(result: Diagnosis, a: Target, b: Target,
     before = result.held_out_before
     assert before is not None
     c = result.compound = Selection(a, b, before, before.discrepancy).run(
-        best, o.effects, before_reps, log)
+        best, [n for n in o.effects if n not in WORLD_MODEL], before_reps, log)
     if o.rounding and len(c.effects) > 1 and result.rounding and \
             result.rounding['rounding'] == result.rounding['given']:
         a, b = _late_rounding(result, a, b, o)
@@ -235,7 +252,8 @@ def _parsimonious(scored: list[Scored], alpha: float) -> list[Scored]:
     if len(scored) < 2 or scored[0][3] is None:
         return scored
     best, best_reps = scored[0], scored[0][3]
-    rivals = [s for s in scored[1:] if s[3] is not None and not s[0].get('closed_loop_worse')
+    rivals = [s for s in scored[1:] if s[3] is not None and s[0]['heldout_reduction'] > 0
+              and not s[0].get('closed_loop_worse')
               and free(s[0]['name']) < free(best[0]['name'])
               and as_good(best[0]['discrepancy_after'], best_reps, s[0]['discrepancy_after'],
                           s[3], alpha)]
@@ -341,7 +359,7 @@ def _late_rounding(result: Diagnosis, a: Target, b: Target, o: Options) -> tuple
 
 def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Options) -> None:
     """What the named effects leave on held-out data, and the empirical model of it."""
-    named = result.fitted_effects
+    named = result.named_effects
     after = result.held_out_after if named and result.held_out_after is not None \
         else result.held_out_before
     assert after is not None

@@ -41,6 +41,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
                              'turn_right_fraction turn_response sensor_turn_response '
                              'turn_size turn_scatter')
     + _family('closed_loop', 'turn_size_scatter', floor=0.03)
+    + _family('closed_loop', 'turn_imbalance', floor=0.3)
+    + _family('closed_loop', 'turn_by_command turn_by_command_scatter', floor=0.05)
+    + _family('closed_loop', 'turn_step_response')
     + _family('closed_loop_noise', ' '.join(f'loop_{view}_{what}'
                                             for view in ('still', 'residual', 'change')
                                             for what in ('spread', 'correlation',

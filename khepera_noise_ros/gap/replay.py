@@ -10,10 +10,11 @@ import numpy as np
 from ..core import network
 from ..core.khepera import DARK, SENSORS, to_tenths
 from ..core.noise import NoiseModel
-from ..effects import Effect
+from ..effects import Effect, Stage
 from ..effects.base import Array
-from ..effects.simulate import EffectEpisodes, SimCache, stationary
+from ..effects.simulate import EffectEpisodes, SimCache, light_table, staged, stationary
 from ..recording import Recording
+from . import turncal
 from .protocol import ProtocolError, base_mode, condition_world, genome_of, kind, runs
 from ..simconfig import SimConfig
 
@@ -28,27 +29,31 @@ class Replayer:
         self.rec, self.config, self.kind = rec, config, kind(rec)
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
         self.cache = cache if cache is not None else SimCache()
-        self._light: tuple[Array, NoiseModel, float] | None = None
-        self._copies: dict[int, tuple[Array, Array, Array, dict[str, Any]]] = {}
+        self._light: dict[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = {}
+        self._copies: dict[tuple[Any, ...], tuple[Array, Array, Array, dict[str, Any]]] = {}
 
     def replay(self, effects: Sequence[Effect] = (), seed: int = 0, copies: int = 1) -> Recording:
         effects = tuple(self.config.effects) + tuple(effects)
         if self.kind == 'closed_loop':
             return self._closed_loop(effects, seed, copies)
-        light, noise, scale = self.light()
-        tiled, step, column, index = self.copies(copies)
+        shaped = tuple(staged(effects, Stage.WORLD)) if self.mode == 'model' else ()
+        light, noise, scale = self.light(shaped)
+        tiled, step, column, index = self.copies(copies, shaped)
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
         if scale != 1.0:
             sim = sim * scale
         return Recording(**index, readings=sim[step, :, column], manifest=self._manifest())
 
-    def light(self) -> tuple[Array, NoiseModel, float]:
-        """(samples, channels, episodes) light of every step, the noise model, the scale."""
-        if self._light is None:
-            self._light = self._make_light()
-        return self._light
+    def light(self, shaped: tuple[Effect, ...] = ()) -> tuple[Array, NoiseModel, float]:
+        """(samples, channels, episodes) light of every step, the noise model, the scale,
+        in the world the world-stage effects ``shaped`` make."""
+        if shaped not in self._light:
+            if len(self._light) >= 8:
+                self._light.pop(next(iter(self._light)))
+            self._light[shaped] = self._make_light(shaped)
+        return self._light[shaped]
 
-    def _make_light(self) -> tuple[Array, NoiseModel, float]:
+    def _make_light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
         rec, config = self.rec, self.config
         episodes_, column = np.unique(rec.episode, return_inverse=True)
         light = np.full((int(rec.step.max()) + 1, rec.channels, episodes_.size), np.nan)
@@ -56,7 +61,7 @@ class Replayer:
         if self.mode == 'model':
             rounded = config.noise.rounding == 'level'
             for label in rec.conditions():
-                table = condition_world(rec, label, config.world).light_table(rounded)
+                table = light_table(condition_world(rec, label, config.world), shaped, rounded)
                 at = rec.condition == label
                 light[rec.step[at], :, column[at]] = table[:, to_tenths(rec.heading_deg[at])].T
         else:
@@ -68,13 +73,17 @@ class Replayer:
             noise = dataclasses.replace(noise, groups=groups)
         return _hold(light) / scale, noise, scale
 
-    def copies(self, copies: int) -> tuple[Array, Array, Array, dict[str, Any]]:
+    def copies(self, copies: int, shaped: tuple[Effect, ...] = ()
+               ) -> tuple[Array, Array, Array, dict[str, Any]]:
         """(the light of ``copies`` copies side by side, read-only; per replayed sample its
         step and column; the replay's index columns)."""
-        if copies not in self._copies:
+        key = (copies, shaped)
+        if key not in self._copies:
+            if len(self._copies) >= 8:
+                self._copies.pop(next(iter(self._copies)))
             rec = self.rec
             episodes_, column = np.unique(rec.episode, return_inverse=True)
-            tiled = np.tile(self.light()[0], (1, 1, copies))
+            tiled = np.tile(self.light(shaped)[0], (1, 1, copies))
             tiled.flags.writeable = False
             span = int(rec.episode.max()) + 1
             index = {'episode': np.concatenate([rec.episode + k * span for k in range(copies)]),
@@ -85,9 +94,9 @@ class Replayer:
                      'power': np.full(len(rec) * copies, np.nan)}
             for value in index.values():
                 value.flags.writeable = False
-            self._copies[copies] = (tiled, np.tile(rec.step, copies), np.concatenate(
+            self._copies[key] = (tiled, np.tile(rec.step, copies), np.concatenate(
                 [column + k * episodes_.size for k in range(copies)]), index)
-        return self._copies[copies]
+        return self._copies[key]
 
     def _manifest(self) -> dict[str, Any]:
         manifest = {k: v for k, v in self.rec.manifest.items()
@@ -100,20 +109,25 @@ class Replayer:
         if rec.channels != SENSORS:
             raise ProtocolError(f"closed-loop replay needs the Khepera's {SENSORS} channels, "
                                 f'the recording has {rec.channels}')
-        genome = genome_of(rec)
+        calibration = turncal.calibrating(rec)      # the protocol's commands, no genome
+        genome = None if calibration else genome_of(rec)
         span = int(rec.episode.max()) + 1
         parts = []
         for ci, label in enumerate(rec.conditions()):
             episodes_ = np.unique(rec.episode[rec.condition == label])
             steps = max(int(rec.step[rec.episode == e].max()) + 1 for e in episodes_)
-            env = EffectEpisodes(condition_world(rec, label, config.world), config.noise,
-                                 dataclasses.replace(config.task, steps=steps), effects)
+            task = dataclasses.replace(config.task, steps=steps)
+            if calibration:
+                task = dataclasses.replace(task, perturbation_deg=0.0)
+            env = EffectEpisodes(condition_world(rec, label, config.world), config.noise, task,
+                                 effects)
             n = episodes_.size * copies
             seeds = np.random.SeedSequence([seed, ci]).generate_state(n, np.uint64) \
                 >> np.uint64(11)
-            parts.append(_run(env, genome, seeds.astype(np.int64),
-                              np.concatenate([episodes_ + k * span for k in range(copies)]),
-                              label))
+            ids = np.concatenate([episodes_ + k * span for k in range(copies)])
+            parts.append(turncal.run(env, rec, episodes_, seeds.astype(np.int64), ids, label)
+                         if genome is None else
+                         _run(env, genome, seeds.astype(np.int64), ids, label))
         cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         return Recording(**cols, manifest=self._manifest())
 

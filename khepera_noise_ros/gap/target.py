@@ -14,11 +14,11 @@ from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
 from ..recording import Recording
-from . import bootstrap, closedloop, converter, dropouts, evidence, stationary
+from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turncal, turns
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
 from .families import FAMILIES, having, of_part
 from ..simconfig import SimConfig
-from .protocol import episodes, kind, runs
+from .protocol import condition_world, episodes, kind, runs
 from .replay import Replayer
 
 SIM_COPIES = 3
@@ -146,9 +146,11 @@ class Target:
     def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
         rec = data.recording
         if data.kind == 'closed_loop':
-            b = closedloop.blocks(rec, rec.readings, lambda order, ep, m: converter.loop_sums(
-                rec.readings[order], data.marks[order], ep, m, self.loop_only),
-                self.config.task.perturb_every, self.loop_only)
+            every = self.config.task.perturb_every
+            b = closedloop.blocks(rec, rec.readings, turns.sums(
+                rec, rec.readings, every, lambda order, ep, m: converter.loop_sums(
+                    rec.readings[order], data.marks[order], ep, m, self.loop_only)),
+                every, self.loop_only)
         else:
             copies = len(rec) // len(self.recordings[i])
             key = (i, copies)
@@ -163,7 +165,7 @@ class Target:
         s = bootstrap.resampled(b, replicates, seed)
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
-                keys, cols = closedloop.stats(b, s, converter.loop_stats)
+                keys, cols = closedloop.stats(b, s, turns.with_stats(converter.loop_stats))
             else:
                 keys, cols = stationary.stats(b, s)
                 more_keys, more_cols = converter.stationary_stats(b, s)
@@ -387,6 +389,15 @@ class TargetEvidence:
 
     def delayed_sensors(self) -> tuple[int, ...]:
         return closedloop.delayed_sensors(self.target.of_kind('closed_loop'))
+
+    def worlds(self) -> dict[str, Any]:
+        t = self.target
+        return {label: condition_world(rec, label, t.config.world) for rec in t.recordings
+                for label in rec.conditions()}
+
+    def turns(self) -> Array:
+        t = self.target
+        return turncal.measured(t.of_kind('closed_loop'), t.of_kind('stationary'), t.config)
 
     def stationary_runs(self, simulated: bool) -> list[Array]:
         t = self.target

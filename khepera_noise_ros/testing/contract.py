@@ -22,7 +22,8 @@ from .. import simconfig
 from ..effects import Stage
 from ..effects.base import Candidate, Effect, Param
 from ..gap.target import Target
-from .protocols import CONFIG, closed_loop_protocol, recorded, stationary_protocol
+from .protocols import (CONFIG, closed_loop_protocol, recorded, stationary_protocol, sweep,
+                        tracked)
 
 
 def _fields(effect: Effect) -> dict[str, Any]:
@@ -135,12 +136,19 @@ class FitCase(NamedTuple):
     truth: Effect
     closed_loop: bool                  # the recording: closed loop (turns), else stationary
     parameters: dict[str, tuple[Any, float]]   # value and tolerance of the main parameters
+    tracked: bool = False              # the closed loop with its headings (turns measured)
+    sweep: float = 0.0                 # stationary: placements every this many degrees
 
 
-def simulated_target(truth: Effect, closed_loop: bool) -> Target:
+def simulated_target(truth: Effect, closed_loop: bool, headings: bool = False,
+                     step: float = 0.0) -> Target:
     """A recording simulated with ``truth``, held as the real data against the plain
     simulator."""
-    if closed_loop:
+    if step:
+        real = recorded(sweep(step), [truth], seed=5)
+    elif headings:
+        real = tracked(closed_loop_protocol(16), [truth], seed=6)
+    elif closed_loop:
         real = recorded(closed_loop_protocol(16), [truth], seed=6)
     else:
         real = recorded(stationary_protocol(samples=20), [truth], seed=5)
@@ -151,7 +159,7 @@ def check_fit(cls: type[Effect], case: FitCase) -> None:
     """The fitter, on a recording simulated with ``case.truth``, locates it where it was
     and recovers its main parameters within their tolerances; a model of what is left
     (no parameters to recover) must bring the simulator closer."""
-    target = simulated_target(case.truth, case.closed_loop)
+    target = simulated_target(case.truth, case.closed_loop, case.tracked, case.sweep)
     cand = cls.fit(target.evidence(target.compare(replicates=40)))
     assert isinstance(cand, Candidate) and cand.name == cls.name and cand.note, cand
     assert isinstance(cand.effect, cls), f'{cls.name}: the fit gave {cand.effect!r} ' \

@@ -64,6 +64,45 @@ def closed_loop_protocol(episodes: int = 24, steps: int = 60) -> Recording:
                                           genome=GENOME))
 
 
+def sweep(step: float = 20.0, samples: int = 20, within: bool = False) -> Recording:
+    """Placements every ``step`` degrees where the lamp is on (one heading where it is
+    off): one episode each as the record command does, or (``within``) one episode per
+    condition turned from heading to heading without a pause."""
+    rows, episode = [], 0
+    for label, world in CONDITIONS.items():
+        heads = np.arange(-180.0, 180.0, step) if world['lamp_distance_mm'] < 1e3 else [0.0]
+        t = 0
+        for h in heads:
+            rows += [(episode, t + i, h, label) for i in range(samples)]
+            t, episode = (t + samples, episode) if within else (0, episode + 1)
+        episode += within
+    e, s, h, c = (np.array(v) for v in zip(*rows))
+    n = len(rows)
+    return Recording(e, s, h.astype(float), c, np.zeros((n, 8)), np.full(n, np.nan),
+                     np.full(n, np.nan), manifest('stationary', CONDITIONS))
+
+
+def turn_calibration(repeats: int = 3, rest: int = 10) -> Recording:
+    """Per power and repeat a placement, then 4 turns of that power right and left in
+    turn, each after ``rest`` readings at rest (the record command's protocol)."""
+    rows, episode = [], 0
+    for _ in range(repeats):
+        for power in range(1, 10):
+            for t in range(rest * 5):
+                k = (t + 1) // rest - 1
+                turn = (t + 1) % rest == 0 and k < 4
+                rows.append((episode, t, -power * 1.5 if t == 0 else np.nan, 'turns_task',
+                             (1 if k % 2 == 0 else -1) if turn else 1, power if turn else 0))
+            episode += 1
+    e, s, h, c, d, p = (np.array(v) for v in zip(*rows))
+    n = len(rows)
+    return Recording(e, s, h.astype(float), c, np.zeros((n, 8)), d.astype(float),
+                     p.astype(float), manifest(
+                         'closed_loop', {'turns_task': CONDITIONS['task']},
+                         calibration='turns', task={'steps': rest * 5, 'perturb_every': 5,
+                                                    'perturbation_deg': 0.0}))
+
+
 def replayed(protocol: Recording, effects: Sequence[Effect] = (), config: SimConfig = CONFIG,
              seed: int = 99, copies: int = 1) -> Recording:
     """The simulator's replay of ``protocol`` with ``effects`` added (headings kept)."""

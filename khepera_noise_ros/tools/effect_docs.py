@@ -16,10 +16,11 @@ import json
 import sys
 from pathlib import Path
 
-from ..effects import NAMES, REGISTRY, Effect
+from ..effects import NAMES, REGISTRY, WORLD_MODEL, Effect
 
 PAGE = Path(__file__).resolve().parents[2] / 'docs' / 'effects.md'
-STAGES = {'light': 'the light a sensor sees, before the model\'s noise',
+STAGES = {'world': 'the light at each bearing, where the world\'s table is made',
+          'light': 'the light a sensor sees, before the model\'s noise',
           'reading': 'the noisy reading (the sensor\'s timing, its converter)',
           'turn': 'a commanded rotation'}
 
@@ -35,6 +36,8 @@ def section(cls: type[Effect]) -> list[str]:
              f'Stage: **{cls.stage.value}** ({STAGES[cls.stage.value]}). Free parameters '
              f'beyond the location, for the parsimony rule: {cls.free}. '
              + ('Looked for by the diagnosis.' if cls.name in NAMES else
+                'A part of the world model, identified first (docs/identification.md).'
+                if cls.name in WORLD_MODEL else
                 'Not in the vocabulary: fitted to what the named effects leave.'), '']
     if len(account) > 1:
         lines += [' '.join(p.split()) for p in account[1].split('\n\n')]

@@ -17,10 +17,13 @@ from typing import Any, ClassVar
 
 import pytest
 
-from khepera_noise_ros.effects import (NAMES, REGISTRY, VOCABULARY, ActuatorTurnError,
-                                       CorrelatedNoise, EmpiricalNoise, IntensityDependentNoise,
+import numpy as np
+
+from khepera_noise_ros.effects import (NAMES, REGISTRY, VOCABULARY, WORLD_MODEL,
+                                       ActuatorResponse, ActuatorTurnError, CorrelatedNoise,
+                                       EmpiricalNoise, IntensityDependentNoise, LightResponse,
                                        SaturationQuantization, SensorGainOffset, SensorLatency,
-                                       TemporalDrift)
+                                       SensorResponse, TemporalDrift)
 from khepera_noise_ros.effects.base import Candidate, Effect
 from khepera_noise_ros.reality.effects import EFFECTS as EMULATOR_EFFECTS
 from khepera_noise_ros.testing.contract import (FitCase, check_fit, check_paths,
@@ -48,7 +51,20 @@ EXAMPLES = [
     EmpiricalNoise((1, 2, 6), (50.0, 300.0), (2.0, 4.0, 1.0, 3.0, 0.5, 5.0),
                    (1.0, 0.0, 0.0, 0.6, 0.8, 0.0, 0.0, 0.0, 1.0), (0.01, 0.0, 0.02), 20.0,
                    (1.0, 0.0, 0.0, 0.5, 0.866, 0.0, 0.3, 0.0, 0.954)),
+    LightResponse((1, 2), (-90.0, 0.0, 90.0), (5.0,), (500.0,),
+                  (400.0, 300.0, 450.0, 420.0, 200.0, 480.0)),
+    LightResponse((4,), (0.0, 90.0), (5.0, 130.0), (500.0, 500.0),
+                  (100.0, 480.0, 300.0, 490.0), 'model'),
+    ActuatorResponse(3.0, 0.9, 0.25, (3.0, 9.0, 27.0), (0.5, 1.0, 1.1), 0.1, 0.5),
+    ActuatorResponse(1.0, 1.1, -0.1, knocks=False),
+    SensorResponse((0, 1, 2), 0.6, 0.3, 0.5),
+    SensorResponse((3,), 1.4),
 ]
+# the lamp's narrower light on s1 and s2 at the task's knots every 10 degrees
+KNOTS = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
+OFF = [np.abs((np.array(KNOTS) - axis + 180.0) % 360.0 - 180.0) for axis in (45.0, 10.0)]
+NARROW = LightResponse((1, 2), KNOTS, (5.0,), (500.0,), tuple(np.round(np.concatenate(
+    [500.0 - 430.0 * np.exp(-np.log(2) * (d / 25.0) ** 2) for d in OFF]), 2)))
 
 
 def _id(effect: Effect) -> str:
@@ -71,6 +87,15 @@ FIT_CASES = {
     'saturation_quantization': FitCase(SaturationQuantization((0, 5), 0.0, 450.0, 4.0), False,
                                        {'high': (450.0, 4.0), 'step': (4.0, 0)}),
     'empirical_noise': FitCase(HUMP, False, {}),
+    # their own protocols: a heading sweep every 10 degrees, the closed loop with its
+    # headings (the turns measured)
+    'light_response': FitCase(NARROW, False, {'sensors': ((1, 2), 0), 'between': ('level', 0)},
+                              sweep=10.0),
+    'sensor_response': FitCase(SensorResponse(tuple(range(8)), 0.0, 0.4, 0.4), False,
+                               {'delay': (0.0, 0.15), 'rate_bright': (0.4, 0.1)}),
+    'actuator_response': FitCase(ActuatorResponse(3.0, 0.9, 0.25), True,
+                                 {'dead_band': (3.0, 0.3), 'gain': (0.9, 0.05),
+                                  'asymmetry': (0.25, 0.05)}, tracked=True),
 }
 
 
@@ -104,10 +129,11 @@ def test_fit(name):
 
 def test_the_names_are_the_emulators_and_the_docs():
     """The diagnosis's vocabulary is the emulator's effects plus 'none'; the empirical
-    model is registered but no vocabulary name; docs/design.md lists the vocabulary."""
+    model and the world model's parts are registered but no vocabulary names;
+    docs/design.md lists the vocabulary."""
     assert set(NAMES) == set(EMULATOR_EFFECTS), (NAMES, EMULATOR_EFFECTS)
     assert VOCABULARY == NAMES + ('none',)
-    assert set(REGISTRY) - set(NAMES) == {EmpiricalNoise.name}
+    assert set(REGISTRY) - set(NAMES) == {EmpiricalNoise.name} | set(WORLD_MODEL)
     text = (DOCS / 'design.md').read_text()
     table = text[text.index('**The effect vocabulary**'):]
     table = table[:table.index('\n\n', table.index('| name |'))]

@@ -1,0 +1,173 @@
+"""``actuator_response``: the executed turn for each commanded size and direction.
+
+A dead-band (static friction eats that many degrees of every turn), a gain beyond it,
+different to the right and to the left, optionally a scale per commanded size (a table
+over degrees), and scatter (a share of the turn made, and degrees per turn).  With
+``knocks`` the task's heading knocks go through the same wheels.  The fit: executed
+turns where they are measured (tracked headings, or the turn-calibration protocol) by
+least squares.  Without measured turns it is not fitted: the closed loop's statistics
+alone confound its form with the noise, and the turn error there is
+``actuator_turn_error``'s.  A response that is a plain scale defers to it too.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy import stats as sps
+from scipy.optimize import nnls
+
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, param
+from .fitting import ALPHA, CLOSED_LOOP
+
+BANDS = np.round(np.arange(0.0, 8.0001, 0.1), 1)     # dead-bands tried, degrees
+MIN_TURNS = 20                                         # measured turns a direct fit needs
+TINY = 1e-9           # weighted squared residual per turn below which a fit gains nothing
+
+
+@dataclass(frozen=True)
+class ActuatorResponse(Effect):
+    """A commanded turn of x degrees (positive to the right) turns sign(x) gain (1 +- a)
+    scale(|x|) max(|x| - dead_band, 0) (1 + scatter N) + jitter N degrees (+ to the
+    right); no turn is made of a zero command."""
+
+    name: ClassVar[str] = 'actuator_response'
+    stage: ClassVar[Stage] = Stage.ACTUATOR
+    free: ClassVar[int] = 4
+    summary: ClassVar[str] = 'the turn made differs in form: dead-band, sides, size, scatter'
+    wheel_knocks: ClassVar[bool] = True
+    dead_band: float = param(0.0, 'degrees of each turn the wheels do not make', low=0.0,
+                             high=45.0)
+    gain: float = param(1.0, 'turn made per commanded degree beyond the dead-band', low=0.0,
+                        high=5.0)
+    asymmetry: float = param(0.0, 'right turns gain (1 + a), left (1 - a)', low=-0.9,
+                             high=0.9)
+    sizes: tuple[float, ...] = param((), 'commanded sizes of the scale table, degrees',
+                                     'floats', above=0.0, ascending=True)
+    scales: tuple[float, ...] = param((), 'scale at each size (constant beyond)', 'floats',
+                                      low=0.0, high=5.0)
+    scatter: float = param(0.0, 'sd of the turn made, a share of it', low=0.0, high=2.0)
+    jitter: float = param(0.0, 'sd of each turn made, degrees', low=0.0, high=45.0)
+    knocks: bool = param(True, 'the task\'s heading knocks go through the same wheels')
+
+    def inconsistency(self) -> str:
+        return '' if len(self.sizes) == len(self.scales) else 'needs one scale per size'
+
+    def mean(self, deg: Array) -> Array:
+        """The turn made of commanded turns ``deg`` without scatter."""
+        size = np.abs(deg)
+        out = np.sign(deg) * self.gain * (1 + np.sign(deg) * self.asymmetry) * \
+            np.maximum(size - self.dead_band, 0.0)
+        if self.sizes:
+            out = out * np.interp(size, self.sizes, self.scales)
+        result: Array = out
+        return result
+
+    def _made(self, deg: Array, z: Array | None) -> Array:
+        out = self.mean(deg)
+        if z is not None:
+            out = out + (self.scatter * np.abs(out) * z[0] + self.jitter * z[1]) * (deg != 0)
+        return out
+
+    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
+        random = bool(self.scatter or self.jitter)
+        return lambda deg: self._made(deg, rng.standard_normal((2,) + np.shape(deg))
+                                      if random else None)
+
+    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+        """Commanded turns (samples, 1, robots) in degrees, made."""
+        if not (self.scatter or self.jitter):
+            return self._made(level, None)
+        z = rng.standard_normal((level.shape[0], 2) + level.shape[2:])
+        return self._made(level, np.moveaxis(z, 1, 0)[:, :, None])
+
+    @classmethod
+    def fit(cls, evidence: Evidence) -> Candidate:
+        if CLOSED_LOOP not in evidence.kinds:
+            return Candidate(cls.name, None, 'no closed-loop or turn-calibration recording: '
+                                             'record --protocol turns to measure the turns')
+        turns = evidence.turns()
+        turns = turns[np.isfinite(turns).all(axis=1) & (turns[:, 0] != 0)]
+        if len(turns) < MIN_TURNS:
+            return Candidate(cls.name, None, f'{len(turns)} turns measured (needs {MIN_TURNS}): '
+                                             'record --protocol turns, or a robot that reports '
+                                             'its heading; the closed loop\'s turn error is '
+                                             'actuator_turn_error\'s')
+        effect, plain = _direct(turns)
+        how = f'{len(turns)} turns measured'
+        if plain:
+            return Candidate(cls.name, None, f'{how}: a plain scale of the turn '
+                                             f'(actuator_turn_error\'s case)')
+        table = f', scale by size {dict(zip(effect.sizes, effect.scales))}' if effect.sizes \
+            else ''
+        return Candidate(cls.name, effect, f'{how}: dead-band {effect.dead_band:g} deg, gain '
+                                           f'{effect.gain:g}, asymmetry {effect.asymmetry:g}'
+                                           f'{table}, scatter {effect.scatter:g}, jitter '
+                                           f'{effect.jitter:g} deg')
+
+
+def _sides(c: Array, e: Array, w: Array, band: float) -> tuple[float, float, float]:
+    """(right gain, left gain, weighted residual sum of squares) beyond ``band``."""
+    out, rss = [], 0.0
+    for side in (1.0, -1.0):
+        at = np.sign(c) == side
+        x = side * np.maximum(np.abs(c[at]) - band, 0.0)
+        g = float((w[at] * x) @ e[at] / ((w[at] * x) @ x)) if x @ x > 0 else 1.0
+        out.append(g)
+        rss += float((w[at] * (e[at] - g * x) ** 2).sum())
+    return out[0], out[1], rss
+
+
+def _form(c: Array, e: Array, w: Array) -> tuple[ActuatorResponse, float]:
+    """The dead-band and the two sides' gains by weighted least squares, and the RSS."""
+    (right, left, rss), band = min(((_sides(c, e, w, b), b) for b in BANDS),
+                                   key=lambda f: f[0][2])
+    asym = float(np.clip((right - left) / (right + left), -0.9, 0.9)) if right + left > 0 \
+        else 0.0
+    return ActuatorResponse(float(band), round((right + left) / 2, 4), round(asym, 4)), rss
+
+
+def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
+    """Weighted least squares on measured turns (weights from the scatter of a first fit);
+    ``plain`` when neither the dead-band and the sides nor a scale per size improve on a
+    single scale (F tests at ``ALPHA``)."""
+    c, e = turns[:, 0], turns[:, 1]
+    n = len(c)
+    effect, _ = _form(c, e, np.ones(n))
+    scatter, jitter = _scatter(effect.mean(c), e - effect.mean(c))
+    w = 1.0 / (scatter ** 2 * effect.mean(c) ** 2 + jitter ** 2 + 0.01)
+    effect, rss = _form(c, e, w)
+    scale = float((w * c) @ e / ((w * c) @ c))
+    rss0 = float((w * (e - scale * c) ** 2).sum())
+    made = effect.mean(c)
+    sizes = np.unique(np.abs(c))
+    ratio, p_size = [], 1.0
+    if sizes.size >= 3:           # a scale per commanded size where it fits better
+        rss_table = 0.0
+        for size in sizes:
+            g = np.abs(c) == size
+            m = made[g]
+            r = float((w[g] * m) @ e[g] / ((w[g] * m) @ m)) if m @ m > 0 else 1.0
+            ratio.append(round(float(np.clip(r, 0.0, 5.0)), 4))
+            rss_table += float((w[g] * (e[g] - r * m) ** 2).sum())
+        dof = n - 3 - sizes.size
+        if dof > 0 and rss - rss_table > TINY * n:
+            f = ((rss - rss_table) / sizes.size) / max(rss_table / dof, TINY)
+            p_size = float(sps.f.sf(f,
+                                    sizes.size, dof))
+    dof = max(n - 3, 1)
+    p_form = float(sps.f.sf(((rss0 - rss) / 2) / max(rss / dof, TINY), 2, dof)) \
+        if rss0 - rss > TINY * n else 1.0
+    table = (tuple(float(x) for x in sizes), tuple(ratio)) if p_size < ALPHA else ((), ())
+    made = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table).mean(c)
+    scatter, jitter = _scatter(made, e - made)
+    effect = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table,
+                              scatter, jitter)
+    return effect, p_form >= ALPHA and p_size >= ALPHA
+
+
+def _scatter(made: Array, residual: Array) -> tuple[float, float]:
+    """(share, degrees): residual variance = share^2 made^2 + degrees^2, non-negative."""
+    coef, _ = nnls(np.stack([made ** 2, np.ones_like(made)], axis=1), residual ** 2)
+    return round(float(np.sqrt(coef[0])), 4), round(float(np.sqrt(coef[1])), 3)

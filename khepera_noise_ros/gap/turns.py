@@ -1,0 +1,152 @@
+"""Closed-loop statistics of the turn made per command, and of the readings settling after
+a turn (per-episode sums beside ``closedloop``'s; the rules: docs/identification.md)."""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from ..effects.base import Array, Key
+from ..recording import Recording
+from . import bootstrap
+
+COMMANDS = tuple(range(-9, 0)) + tuple(range(1, 10))     # signed powers, + to the right
+MIN_TURNS = 4                    # rows a command's statistics need in the full data
+BEFORE, AFTER, SETTLED = 2, 8, 4     # rests around a turn: before, after, the last settled
+SAMPLES = 3                      # samples after a turn whose settling is compared
+MIN_CHANGE = 100.0     # mean squared change a sensor's settling needs (10 readings a turn)
+SIDES = ('bright', 'dark')
+Part = Callable[[bootstrap.Blocks, Array, int, str], tuple[list[Key], list[Array]]]
+
+
+def knock_every(rec: Recording, every: int) -> int | None:
+    """Steps between knocks, None when the recording's task has none."""
+    task = rec.manifest.get('task') or {}
+    return None if float(task.get('perturbation_deg', 1.0)) == 0.0 else int(every)
+
+
+def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episodes: int,
+              every: int | None) -> dict[str, Array]:
+    """Per-episode sums: per signed command the change of the readings' imbalance and,
+    where headings are known, the turn made; the readings after a lone turn."""
+    steps = rec.step[order]
+    u = np.nan_to_num(rec.direction[order] * rec.power[order])
+    r = x[order][:, :8].astype(np.float64)
+    nxt = np.r_[(ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1), False]
+    knock = np.zeros(len(u), bool) if every is None else steps % every == 0
+    ok = np.flatnonzero(nxt & ~np.r_[knock[1:], False] & (u != 0))
+    onehot = (np.rint(u[ok])[:, None] == np.array(COMMANDS)[None, :]).astype(np.float64)
+    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
+    change = imbalance[ok + 1] - imbalance[ok]
+    out = {'tc_imb': _by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
+    heading = rec.heading_deg[order]
+    if np.isfinite(heading).all():
+        dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
+        out['tc_turn'] = _by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
+    out.update(_settling(r, u, ep, steps, knock, episodes))
+    return out
+
+
+def _moments(v: Array) -> Array:
+    return np.stack([np.ones_like(v), v, v * v], axis=1)[:, None, :]
+
+
+def _by(ep: np.ndarray, values: Array, episodes: int) -> Array:
+    out = np.zeros((episodes,) + values.shape[1:])
+    np.add.at(out, ep, values)
+    return out
+
+
+def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray,
+              episodes: int) -> dict[str, Array]:
+    """Lone turns: a command with rests of power 0 (no knock) ``BEFORE`` rows before and
+    ``AFTER`` rows after in one run of steps; per side of each sensor's change, the
+    products (reading after - settled)(before - settled) and (before - settled)^2."""
+    dd = np.zeros((episodes, 2, SAMPLES, r.shape[1]))
+    d2, n = np.zeros((episodes, 2, r.shape[1])), np.zeros((episodes, 2, r.shape[1]))
+    t = lone(u, ep, steps, knock)
+    if t.size:
+        old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
+        new = r[t[:, None] + np.arange(AFTER - SETTLED + 1, AFTER + 1)[None, :]].mean(axis=1)
+        change = old - new
+        side = (change < 0).astype(np.int64)             # 0: towards bright, 1: dark
+        sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
+        e = np.broadcast_to(ep[t][:, None], change.shape)
+        np.add.at(d2, (e, side, sensor), change ** 2)
+        np.add.at(n, (e, side, sensor), 1.0)
+        for j in range(SAMPLES):
+            np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
+    return {'tc_dd': dd, 'tc_d2': d2, 'tc_n': n}
+
+
+def lone(u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray) -> np.ndarray:
+    """Rows (in episode and step order) of lone turns: rests of power 0 and no knock
+    ``BEFORE`` rows before and ``AFTER`` after, in one run of steps."""
+    span = np.arange(-BEFORE, AFTER + 1)
+    t = np.flatnonzero(u != 0)
+    t = t[(t >= BEFORE) & (t + AFTER < len(u))]
+    if not t.size:
+        return t
+    rows = t[:, None] + span[None, :]
+    same = (ep[rows] == ep[t][:, None]).all(axis=1) & \
+        (steps[rows] - steps[t][:, None] == span[None, :]).all(axis=1)
+    rest = (u[rows][:, span != 0] == 0).all(axis=1)
+    calm = ~knock[rows[:, 1:]].any(axis=1)
+    out: np.ndarray = t[same & rest & calm]
+    return out
+
+
+def stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], list[Array]]:
+    """Stratum ``i``'s turn statistics: ``turn_imbalance`` and, with headings,
+    ``turn_by_command`` and its scatter per signed command; ``turn_step_response``."""
+    keys: list[Key] = []
+    cols: list[Array] = []
+    with np.errstate(invalid='ignore', divide='ignore'):
+        for name, family in (('tc_imb', 'turn_imbalance'), ('tc_turn', 'turn_by_command')):
+            if not b.has(name):
+                continue
+            m = b.part(s, name)[:, i]                     # (R, commands, 3)
+            mean = m[..., 1] / m[..., 0]
+            sd = np.sqrt(np.clip(m[..., 2] / m[..., 0] - mean ** 2, 0.0, None))
+            for j, command in enumerate(COMMANDS):
+                if m[0, j, 0] < MIN_TURNS:
+                    continue
+                part = f'{"right" if command > 0 else "left"} {abs(command)}'
+                keys.append(Key(family, (), c, part))
+                cols.append(mean[:, j])
+                if family == 'turn_by_command':
+                    keys.append(Key('turn_by_command_scatter', (), c, part))
+                    cols.append(sd[:, j])
+        if not b.has('tc_dd'):
+            return keys, cols
+        dd, d2 = b.part(s, 'tc_dd')[:, i], b.part(s, 'tc_d2')[:, i]
+        n = b.part(s, 'tc_n')[0, i]
+        for side, label in enumerate(SIDES):
+            for k in range(d2.shape[-1]):
+                if n[side, k] < MIN_TURNS or d2[0, side, k] < MIN_CHANGE * n[side, k]:
+                    continue
+                for j in range(SAMPLES):
+                    keys.append(Key('turn_step_response', (k,), c,
+                                    f'sample {j} towards {label}'))
+                    cols.append(dd[:, side, j, k] / d2[:, side, k])
+    return keys, cols
+
+
+def with_stats(more: Part) -> Part:
+    """``more``'s statistics of a stratum followed by the turn statistics."""
+    def both(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], list[Array]]:
+        k1, c1 = more(b, s, i, c)
+        k2, c2 = stats(b, s, i, c)
+        return k1 + k2, c1 + c2
+    return both
+
+
+def sums(rec: Recording, x: Array, every: int, more: Callable[..., dict[str, Any]]
+         ) -> Callable[[np.ndarray, np.ndarray, int], dict[str, Array]]:
+    """``more``'s per-episode sums followed by the turn sums (``closedloop.blocks``) of a
+    turn calibration; a controller's episodes keep their statistics (its turns are few
+    per command and tied to what it saw)."""
+    if rec.manifest.get('calibration') != 'turns':
+        return more
+    return lambda order, ep, m: {**more(order, ep, m),
+                                 **loop_sums(rec, x, order, ep, m, knock_every(rec, every))}

@@ -1,0 +1,132 @@
+"""The diagnosis's side of the world model: the turn statistics per command and after lone
+turns, the turn calibration's replay and its turns (measured, or inferred through a
+sweep), and the world identified before the noise effects."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from khepera_noise_ros.core.noise import NoiseModel
+from khepera_noise_ros.effects import (ActuatorResponse, LightResponse, SensorResponse,
+                                       WORLD_MODEL)
+from khepera_noise_ros.gap import diagnose, turncal
+from khepera_noise_ros.gap.protocol import kind
+from khepera_noise_ros.gap.replay import Replayer
+from khepera_noise_ros.gap.target import Target
+from khepera_noise_ros.recording import FORMAT, Recording
+from khepera_noise_ros import simconfig
+
+CONFIG = simconfig.SimConfig(noise=NoiseModel.independent_only(0.02))
+TASK = {'lamp_distance_mm': 5.0, 'ambient': 500.0}
+GENOME = [0.9, -0.6, 0.5, -0.4, 0.7, 0.3, -0.8, 0.9, -0.5, 0.6, -0.9, -0.2, 2.5, -1.5, -2.5,
+          1.5, 0.1, -0.1, 0.2, 0.3]
+ACTUATOR = ActuatorResponse(3.0, 0.9, 0.25)
+
+
+def manifest(protocol: str, conditions: dict, **extra) -> dict:
+    return {'format': FORMAT, 'source': 'simulator', 'sample_period_s': 1.0,
+            'protocol': protocol, 'conditions': conditions, **extra}
+
+
+def recording(rows: list, protocol: str, conditions: dict, **extra) -> Recording:
+    e, s, h, c, d, p = (np.array(v) for v in zip(*rows))
+    n = len(rows)
+    return Recording(e, s, h.astype(float), c, np.zeros((n, 8)), d.astype(float),
+                     p.astype(float), manifest(protocol, conditions, **extra))
+
+
+def sweep(step: float = 10.0, samples: int = 10) -> Recording:
+    """The record command's sweep in the task's light: a placement per heading."""
+    heads = np.arange(-180.0, 180.0, step)
+    return recording([(k, t, h, 'bulb_1ft', np.nan, np.nan) for k, h in enumerate(heads)
+                      for t in range(samples)], 'stationary', {'bulb_1ft': TASK})
+
+
+def calibration(repeats: int = 3, rest: int = 10) -> Recording:
+    """The record command's turn calibration (headings known at the placements)."""
+    rows, episode = [], 0
+    for _ in range(repeats):
+        for power in range(1, 10):
+            for t in range(rest * 5):
+                k = (t + 1) // rest - 1
+                turn = (t + 1) % rest == 0 and k < 4
+                rows.append((episode, t, -power * 1.5 if t == 0 else np.nan, 'turns_task',
+                             (1 if k % 2 == 0 else -1) if turn else 1, power if turn else 0))
+            episode += 1
+    return recording(rows, 'closed_loop', {'turns_task': TASK}, calibration='turns',
+                     task={'steps': rest * 5, 'perturb_every': 5, 'perturbation_deg': 0.0})
+
+
+def closed_loop(episodes: int = 16) -> Recording:
+    return recording([(e, t, np.nan, 'task', 1, 1) for e in range(episodes)
+                      for t in range(60)], 'closed_loop', {'task': TASK}, genome=GENOME)
+
+
+def recorded(protocol: Recording, effects=(), seed: int = 5, tracked: bool = True
+             ) -> Recording:
+    rec = Replayer(protocol, CONFIG).replay(tuple(effects), seed)
+    rec.manifest = dict(protocol.manifest, source='emulator')
+    if not tracked and kind(rec) == 'closed_loop':
+        rec.heading_deg = protocol.heading_deg.copy()
+    return rec
+
+
+def statistics(rec: Recording) -> dict:
+    real = Target([rec], CONFIG, 0, replicates=20).real
+    return {k: v for k, v in zip(real.keys, real.estimate)}
+
+
+def test_the_calibration_replays_its_commands_from_its_placements():
+    rec = recorded(calibration(repeats=1))
+    first = rec.step == 0
+    np.testing.assert_array_equal(rec.heading_deg[first], -1.5 * np.arange(1, 10))
+    turned = np.flatnonzero(rec.power > 0)
+    made = (rec.heading_deg[turned + 1] - rec.heading_deg[turned] + 180) % 360 - 180
+    np.testing.assert_allclose(made, 3.0 * rec.direction[turned] * rec.power[turned])
+    assert len(turned) == 36 and rec.power[~np.isin(np.arange(len(rec)), turned)].max() == 0
+
+
+def test_the_turn_per_command_and_the_settling_are_compared_where_they_can_be():
+    tracked = statistics(recorded(calibration(), [ACTUATOR]))
+    turn = {k.part: v for k, v in tracked.items() if k.family == 'turn_by_command'}
+    assert len(turn) == 18
+    assert turn['right 9'] == pytest.approx(0.9 * 1.25 * 24.0, abs=0.3)
+    assert turn['left 9'] == pytest.approx(-0.9 * 0.75 * 24.0, abs=0.3)
+    assert turn['right 1'] == 0.0                  # a turn inside the dead-band
+    assert any(k.family == 'turn_step_response' for k in tracked)
+    untracked = statistics(recorded(calibration(), [ACTUATOR], tracked=False))
+    assert not any(k.family == 'turn_by_command' for k in untracked)
+    assert sum(k.family == 'turn_imbalance' for k in untracked) == 18
+
+
+def test_turns_are_measured_where_headings_are_known_and_inferred_through_a_sweep():
+    loop = recorded(calibration(), [ACTUATOR], tracked=False)
+    assert turncal.measured([loop], [], CONFIG).shape == (0, 2)     # nothing to infer with
+    turns = turncal.measured([loop], [recorded(sweep())], CONFIG)
+    assert turns.shape == (108, 2)
+    error = np.abs(turns[:, 1] - ACTUATOR.mean(turns[:, 0]))
+    assert error.mean() < 0.6 and error.max() < 3.0, error
+    tracked = turncal.measured([recorded(calibration(), [ACTUATOR])], [], CONFIG)
+    np.testing.assert_allclose(tracked[:, 1], ACTUATOR.mean(tracked[:, 0]), atol=0.2)
+
+
+def test_the_diagnosis_identifies_the_world_before_the_noise():
+    knots = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
+    d = np.abs((np.array(knots) + 180.0) % 360.0 - 180.0)
+    light = LightResponse((2, 3), knots, (5.0,), (500.0,), tuple(np.round(np.r_[
+        500 - 420 * np.exp(-np.log(2) * (np.abs(d - 10) / 20) ** 2),
+        500 - 420 * np.exp(-np.log(2) * (np.abs(d + 10) / 20) ** 2)], 2)))
+    truth = [light, SensorResponse(tuple(range(8)), 0.0, 0.5, 0.5), ACTUATOR]
+    recordings = [recorded(sweep(), truth, seed=1), recorded(calibration(), truth, seed=2),
+                  recorded(closed_loop(), truth, seed=3)]
+    result = diagnose.diagnose(recordings, diagnose.Options(
+        config=CONFIG, replicates=60, remainder=False, rounding=False))
+    assert result.world is not None, result.notes
+    found = [e.name for e in result.world.effects]
+    assert {'light_response', 'actuator_response'} <= set(found), result.world.notes
+    block = result.to_json()['world']
+    assert block['heldout_reduction'] > 0.5 and block['p_value'] < 0.05
+    assert [e.name for e in result.fitted_effects][:len(found)] == found
+    assert not set(WORLD_MODEL) & {e['name'] for e in result.effects}
+    actuator = next(e for e in result.world.effects if e.name == 'actuator_response')
+    assert actuator.dead_band == pytest.approx(3.0, abs=0.6)
