@@ -140,7 +140,12 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    block_lengths=[full.block_lengths[i] for i, _ in part],
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
-    world = identify.world_model(a, b, b.compare(), o.effects, log) if significant else None
+    parts: dict[str, str] = {}
+    world = identify.world_model(a, b, b.compare(), o.effects, log, parts) \
+        if significant else None
+    if world is None and parts:     # never silent about a part its protocol would identify
+        notes.append('the world model is the simulator\'s own: ' + '; '.join(
+            f'{name}: {note}' for name, note in parts.items()))
     if world is not None:         # the simulator identified: its world, then the effects
         result.world = world
         notes.append(f'the world identified: {", ".join(e.name for e in world.effects)} '

@@ -30,11 +30,13 @@ class World:
 
 
 def world_model(a: Target, b: Target, before: Comparison, names: Sequence[str],
-                log: Callable[[str], None] | None = None) -> World | None:
+                log: Callable[[str], None] | None = None,
+                notes: dict[str, str] | None = None) -> World | None:
     """The world model's parts among ``names`` fitted on ``a`` and judged on ``b``
-    (``before``: ``b`` against the stock simulator); None when none is kept."""
+    (``before``: ``b`` against the stock simulator); None when none is kept.  ``notes``
+    gets each part's note (what it found, or the protocol it lacks)."""
     fitted: list[Effect] = []
-    notes: dict[str, str] = {}
+    notes = {} if notes is None else notes
     for name in (n for n in WORLD_MODEL if n in names):
         given = a.with_given(fitted)
         cand = fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))

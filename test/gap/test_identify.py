@@ -14,6 +14,7 @@ from khepera_noise_ros.gap.protocol import kind
 from khepera_noise_ros.gap.replay import Replayer
 from khepera_noise_ros.gap.target import Target
 from khepera_noise_ros.recording import FORMAT, Recording
+from khepera_noise_ros.testing import protocols
 from khepera_noise_ros import simconfig
 
 CONFIG = simconfig.SimConfig(noise=NoiseModel.independent_only(0.02))
@@ -130,3 +131,18 @@ def test_the_diagnosis_identifies_the_world_before_the_noise():
     assert not set(WORLD_MODEL) & {e['name'] for e in result.effects}
     actuator = next(e for e in result.world.effects if e.name == 'actuator_response')
     assert actuator.dead_band == pytest.approx(3.0, abs=0.6)
+
+
+def test_without_the_protocols_the_world_is_the_simulator_s_and_the_notes_say_which():
+    """Section 2's kind of recording (a few headings, no turns) of a robot with a
+    misshapen light response: no part is identified, and the notes name the protocols
+    that would (the sweep for the shape, the turn calibration for the wheels)."""
+    knots = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
+    d = np.abs((np.array(knots) - 45.0 + 180.0) % 360.0 - 180.0)
+    narrow = LightResponse((1,), knots, (5.0,), (500.0,), tuple(np.round(
+        500.0 - 430.0 * np.exp(-np.log(2) * (d / 25.0) ** 2), 2)))
+    rec = protocols.recorded(protocols.sweep(step=90.0, samples=30), [narrow], seed=5)
+    result = diagnose.diagnose([rec], diagnose.Options(config=CONFIG, replicates=40))
+    assert result.gap_significant and result.world is None
+    note = next(n for n in result.notes if n.startswith("the world model is the simulator's"))
+    assert 'record --protocol sweep' in note and 'record --protocol turns' in note, note
