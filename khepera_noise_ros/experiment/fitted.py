@@ -8,7 +8,7 @@ from pathlib import Path
 import yaml
 
 from .. import simconfig
-from ..effects import NAMES, REGISTRY
+from ..effects import DEFAULT, REGISTRY
 
 NAME = 'diagnosed'
 KEYS = simconfig.NOISE_KEYS + ('effects',)
@@ -60,7 +60,7 @@ def _check_names(text, source: str) -> None:
         name = entry.get('name') if isinstance(entry, dict) else entry
         if name not in REGISTRY:
             raise ValueError(f"{source}: unknown effect {name!r}; known effects: "
-                             f"{', '.join(NAMES)} (and empirical_noise, the remainder model)")
+                             f"{', '.join(DEFAULT)} (and empirical_noise, the remainder model)")
 
 
 def simulator(params: dict) -> simconfig.SimConfig:

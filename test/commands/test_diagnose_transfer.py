@@ -158,7 +158,7 @@ def test_a_bad_params_file_is_refused_in_one_line_naming_it(tmp_path, capsys, co
     assert cli.main([command, '--params', unknown, '--out', str(tmp_path / 'o')]) == 2
     err = capsys.readouterr().err.strip()
     assert '\n' not in err and "'wheel_wobble'" in err and 'fitted.yaml' in err
-    assert all(name in err for name in fx.NAMES)
+    assert all(name in err for name in fx.DEFAULT)      # the world model's parts too
 
 
 def test_replicate_and_sweep_run_the_diagnosed_condition(tmp_path):
