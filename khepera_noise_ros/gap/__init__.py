@@ -8,6 +8,5 @@
   converter   limits, the lattice                      dropouts    lost readings, counted
   bootstrap   the block bootstrap                      replay      a protocol in the simulator
   protocol    what a recording is                      split       fit and held-out parts
-  allan       Allan deviation                          identify    the world model, first
-  turns       turn statistics per command              turncal     the turn calibration
+  allan       Allan deviation                          turns       turns: per command, measured
 """

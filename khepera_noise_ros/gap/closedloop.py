@@ -11,6 +11,7 @@ from ..core.task import fitness_factors
 from ..effects.base import AnyArray, Array, Key
 from ..recording import Recording
 from . import bootstrap
+from .protocol import ordered
 
 FACTORS = ('balance', 'intensity', 'turning')
 BANDS = (0.0, 175.0, 350.0)          # lower edges of the noise's level bands (readings)
@@ -21,16 +22,6 @@ QUIET_PART = f'readings >= {QUIET:g}'
 CHANGE_LAGS = 4                      # commands u(t) .. u(t - 3): a latency up to 3 steps
 DELAYS = (0, 1, 2, 3)                # delays the residual view tries
 HEADING_BIN, BIN_DENSITY, REGRESSORS, CLEAR = 10.0, 0.5, 5, 0.9
-
-
-def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
-    """(episodes, episode index, sample order, steps, pair): the recording in episode and
-    step order; ``pair``: the sample and the one before are consecutive steps of one."""
-    episodes, ep = np.unique(rec.episode, return_inverse=True)
-    order = np.lexsort((rec.step, ep))
-    ep, steps = ep[order], rec.step[order]
-    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
-    return episodes, ep, order, steps, pair
 
 
 def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], perturb_every: int,

@@ -13,12 +13,12 @@ from ..effects import DEFAULT, WORLD_MODEL, Effect, EmpiricalNoise
 from ..effects.base import Array, Candidate
 from ..effects.fitting import ALPHA
 from ..recording import Recording
-from . import allan, bootstrap, identify, split
+from . import allan, bootstrap, split
 from .compare import Comparison, entries, localise, paired_p
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
-from .select import (MIN_ADDED, MIN_REDUCTION, Compound, Selection, as_good, fit_one, free,
-                     loop_worse)
+from .select import (FINGERPRINT_REPLICATES, MIN_ADDED, MIN_REDUCTION, STEP_ALPHA, Compound,
+                     Selection, as_good, fit_one, free, loop_worse)
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -46,6 +46,23 @@ class Options:
 
 
 @dataclass
+class World:
+    """The world model's parts identified before the effects (docs/identification.md)."""
+    effects: list[Effect]
+    before: float                     # held-out discrepancy of the stock simulator
+    after: float                      # ... with the world identified
+    p_value: float
+    notes: dict[str, str] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {'effects': [{'name': e.name, 'sensors': list(e.sensors),
+                             'parameters': e.parameters()} for e in self.effects],
+                'discrepancy_before': self.before, 'discrepancy_after': self.after,
+                'heldout_reduction': 1.0 - self.after / self.before if self.before > 0 else 0.0,
+                'p_value': self.p_value, 'notes': self.notes}
+
+
+@dataclass
 class Diagnosis:
     where: list[dict[str, Any]]
     localisation: dict[str, Any]
@@ -65,7 +82,7 @@ class Diagnosis:
     empirical: Effect | None = None  # the empirical model, when it brings the simulator closer
     allan: dict[str, Any] | None = None
     rounding: dict[str, Any] | None = None
-    world: identify.World | None = None   # the world model's parts, in the simulator
+    world: World | None = None   # the world model's parts, in the simulator
 
     @property
     def fitted_effects(self) -> list[Effect]:
@@ -141,7 +158,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
     parts: dict[str, str] = {}
-    world = identify.world_model(a, b, b.compare(), o.effects, log, parts) \
+    world = _world(a, b, b.compare(), o.effects, log, parts) \
         if significant else None
     if world is None and parts:     # never silent about a part its protocol would identify
         notes.append('the world model is the simulator\'s own: ' + '; '.join(
@@ -197,6 +214,46 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if significant and o.remainder:
         _remainder(result, a, b, d_before, o)
     return result
+
+
+def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
+           log: Callable[[str], None] | None = None,
+           notes: dict[str, str] | None = None) -> World | None:
+    """The simulator's world identified before its noise: the world model's parts among
+    ``names`` fitted on ``a`` in order, each given those before it (the light shapes what
+    a sensor follows, and both what a turn shows), then dropped while dropping one lowers
+    the held-out discrepancy on ``b``; kept when the set lowers it significantly from
+    ``before`` (the stock simulator's). ``notes`` gets each part's note (what it found, or
+    the protocol it lacks)."""
+    fitted: list[Effect] = []
+    notes = {} if notes is None else notes
+    for part in (n for n in WORLD_MODEL if n in names):
+        given = a.with_given(fitted)
+        cand = fit_one(part, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        notes[part] = cand.note
+        if cand.effect is not None:
+            fitted.append(cand.effect)
+    if not fitted:
+        return None
+    current = b.compare(fitted)
+    while fitted:                 # drop the part whose absence the held-out data prefer
+        trials = [(b.compare(fitted[:i] + fitted[i + 1:]), i) for i in range(len(fitted))]
+        best, i = min(trials, key=lambda t: t[0].discrepancy)
+        if best.discrepancy >= current.discrepancy:
+            break
+        notes[fitted[i].name] += '; dropped: the held-out data are closer without it'
+        fitted.pop(i)
+        current = best
+    if not fitted:
+        return None
+    p = paired_p(b.replicate_discrepancies(before), b.replicate_discrepancies(current),
+                 before.discrepancy, current.discrepancy)
+    if p >= STEP_ALPHA or current.discrepancy >= before.discrepancy:
+        return None
+    if log:
+        log(f'world: {", ".join(e.name for e in fitted)} -> '
+            f'{1 - current.discrepancy / before.discrepancy:.2f}')
+    return World(fitted, before.discrepancy, current.discrepancy, p, notes)
 
 
 def _compound(result: Diagnosis, a: Target, b: Target,

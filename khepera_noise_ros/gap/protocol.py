@@ -121,9 +121,24 @@ def check(recordings: Sequence[Recording]) -> None:
                 raise ValueError(f'recording {name(rec, i)} has no variation: every used '
                                  f'channel is constant at every heading, so its noise cannot '
                                  f'be compared (a disconnected or stuck sensor?)')
-        elif rec.manifest.get('calibration') != 'turns':     # a turn calibration has none
+        elif not calibrating(rec):     # a turn calibration has no genome
             genome_of(rec)
 
 
 def name(rec: Recording, i: int) -> str:
     return str(rec.manifest.get('name', f'#{i + 1}'))
+
+
+def calibrating(rec: Recording) -> bool:
+    """Is ``rec`` a turn calibration (commands of the protocol, not of a genome)?"""
+    return rec.manifest.get('calibration') == 'turns'
+
+
+def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
+    """(episodes, episode index, sample order, steps, pair): the recording in episode and
+    step order; ``pair``: the sample and the one before are consecutive steps of one."""
+    episodes, ep = np.unique(rec.episode, return_inverse=True)
+    order = np.lexsort((rec.step, ep))
+    ep, steps = ep[order], rec.step[order]
+    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+    return episodes, ep, order, steps, pair

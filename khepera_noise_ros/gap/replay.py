@@ -14,8 +14,8 @@ from ..effects import Effect, Stage
 from ..effects.base import Array
 from ..effects.simulate import EffectEpisodes, SimCache, light_table, staged, stationary
 from ..recording import Recording
-from . import turncal
-from .protocol import ProtocolError, base_mode, condition_world, genome_of, kind, runs
+from .protocol import (ProtocolError, base_mode, calibrating, condition_world, genome_of, kind,
+                       runs)
 from ..simconfig import SimConfig
 
 
@@ -109,7 +109,7 @@ class Replayer:
         if rec.channels != SENSORS:
             raise ProtocolError(f"closed-loop replay needs the Khepera's {SENSORS} channels, "
                                 f'the recording has {rec.channels}')
-        calibration = turncal.calibrating(rec)      # the protocol's commands, no genome
+        calibration = calibrating(rec)      # the protocol's commands, no genome
         genome = None if calibration else genome_of(rec)
         span = int(rec.episode.max()) + 1
         parts = []
@@ -125,7 +125,7 @@ class Replayer:
             seeds = np.random.SeedSequence([seed, ci]).generate_state(n, np.uint64) \
                 >> np.uint64(11)
             ids = np.concatenate([episodes_ + k * span for k in range(copies)])
-            parts.append(turncal.run(env, rec, episodes_, seeds.astype(np.int64), ids, label)
+            parts.append(run_calibration(env, rec, episodes_, seeds.astype(np.int64), ids, label)
                          if genome is None else
                          _run(env, genome, seeds.astype(np.int64), ids, label))
         cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
@@ -162,3 +162,38 @@ def _hold(light: Array) -> Array:
         light[t][gap] = light[t + 1][gap]
     out: Array = np.nan_to_num(light)
     return out
+
+
+def run_calibration(env: EffectEpisodes, rec: Recording, episodes: np.ndarray,
+                    seeds: np.ndarray, ids: np.ndarray, label: str) -> dict[str, np.ndarray]:
+    """The turn calibration's replay: the recorded commands of ``episodes`` (tiled over
+    copies as ``seeds``) from each episode's recorded first heading, in ``env``."""
+    steps = env.task.steps
+    copies = seeds.size // episodes.size
+    start = np.zeros(episodes.size)
+    command = np.zeros((2, steps, episodes.size))
+    command[0] = 1.0
+    for i, e in enumerate(episodes):
+        at = rec.episode == e
+        first = np.argmin(np.where(at, rec.step, np.iinfo(np.int64).max))
+        start[i] = np.nan_to_num(rec.heading_deg[first])
+        s = rec.step[at]
+        command[0, s, i] = np.nan_to_num(rec.direction[at], nan=1.0)
+        command[1, s, i] = np.nan_to_num(rec.power[at])
+    command = np.tile(command, (1, 1, copies))
+    readings: Array | None = env.reset(seeds, bearing_deg=np.tile(start, copies))
+    rows = []
+    t = 0
+    while readings is not None:
+        d, p = command[0, t].astype(np.int64), command[1, t].astype(np.int64)
+        rows.append((env.bearing_deg.copy(), readings.copy(), d, p))
+        readings = env.step(d, p)
+        t += 1
+    n, t = seeds.size, len(rows)
+    return {'episode': np.repeat(ids, t), 'step': np.tile(np.arange(t), n),
+            'heading_deg': np.stack([r[0] for r in rows], axis=1).ravel(),
+            'condition': np.full(n * t, label),
+            'readings': np.stack([r[1] for r in rows], axis=1).reshape(n * t, -1)
+            .astype(np.float64),
+            'direction': np.stack([r[2] for r in rows], axis=1).ravel().astype(np.float64),
+            'power': np.stack([r[3] for r in rows], axis=1).ravel().astype(np.float64)}

@@ -14,7 +14,7 @@ from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
 from ..recording import Recording
-from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turncal, turns
+from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turns
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
 from .families import FAMILIES, having, of_part
 from ..simconfig import SimConfig
@@ -397,7 +397,7 @@ class TargetEvidence:
 
     def turns(self) -> Array:
         t = self.target
-        return turncal.measured(t.of_kind('closed_loop'), t.of_kind('stationary'), t.config)
+        return turns.measured(t.of_kind('closed_loop'), t.of_kind('stationary'), t.config)
 
     def stationary_runs(self, simulated: bool) -> list[Array]:
         t = self.target

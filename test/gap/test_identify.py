@@ -9,7 +9,7 @@ import pytest
 from khepera_noise_ros.core.noise import NoiseModel
 from khepera_noise_ros.effects import (ActuatorResponse, LightResponse, SensorResponse,
                                        WORLD_MODEL)
-from khepera_noise_ros.gap import diagnose, turncal
+from khepera_noise_ros.gap import diagnose, turns
 from khepera_noise_ros.gap.protocol import kind
 from khepera_noise_ros.gap.replay import Replayer
 from khepera_noise_ros.gap.target import Target
@@ -102,12 +102,12 @@ def test_the_turn_per_command_and_the_settling_are_compared_where_they_can_be():
 
 def test_turns_are_measured_where_headings_are_known_and_inferred_through_a_sweep():
     loop = recorded(calibration(), [ACTUATOR], tracked=False)
-    assert turncal.measured([loop], [], CONFIG).shape == (0, 2)     # nothing to infer with
-    turns = turncal.measured([loop], [recorded(sweep())], CONFIG)
-    assert turns.shape == (108, 2)
-    error = np.abs(turns[:, 1] - ACTUATOR.mean(turns[:, 0]))
+    assert turns.measured([loop], [], CONFIG).shape == (0, 2)     # nothing to infer with
+    made = turns.measured([loop], [recorded(sweep())], CONFIG)
+    assert made.shape == (108, 2)
+    error = np.abs(made[:, 1] - ACTUATOR.mean(made[:, 0]))
     assert error.mean() < 0.6 and error.max() < 3.0, error
-    tracked = turncal.measured([recorded(calibration(), [ACTUATOR])], [], CONFIG)
+    tracked = turns.measured([recorded(calibration(), [ACTUATOR])], [], CONFIG)
     np.testing.assert_allclose(tracked[:, 1], ACTUATOR.mean(tracked[:, 0]), atol=0.2)
 
 
