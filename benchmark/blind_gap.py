@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
 import time
@@ -32,8 +31,7 @@ os.environ.setdefault('OMP_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from khepera_noise_ros.core import evolution, network  # noqa: E402
-from khepera_noise_ros.core.evaluation import CoreEvaluator  # noqa: E402
+from khepera_noise_ros.core import evolution  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.experiment import transfer  # noqa: E402
@@ -42,122 +40,14 @@ from khepera_noise_ros.effects import VOCABULARY  # noqa: E402
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots  # noqa: E402
 from khepera_noise_ros.simconfig import SimConfig  # noqa: E402
 from khepera_noise_ros.reality import effects as emu  # noqa: E402
-from khepera_noise_ros.reality.effects.config import SENSOR_DRAWS  # noqa: E402
-from khepera_noise_ros.reality.effects.processes import SensorNoise  # noqa: E402
-from khepera_noise_ros.reality.world import CONDITIONS, EmulatedWorld  # noqa: E402
-from khepera_noise_ros.recording import FORMAT, Recording  # noqa: E402
+from khepera_noise_ros.recording import Recording  # noqa: E402
+# the emulated robot and its recording protocols, shared with the tests
+from khepera_noise_ros.testing.emulated import (  # noqa: E402,F401
+    CLOSED_LOOP_EPISODES, REPEATS, SAMPLES, SENSOR_NOISE, SETTLE, STATIONARY, SWEEP,
+    evolved_genome, record_closed_loop, record_stationary, robot)
 
-SENSOR_NOISE = 0.02
-# The lamp on each sensor's axis in turn (sensor angles), in an order that lights and
-# darkens every sensor several times, so that a clip or a slow sensor shows on each.
-SWEEP = (10, -90, 45, -170, -10, 90, -45, 170)
-STATIONARY = {'task': SWEEP, 'bulb_1ft': SWEEP, 'bulb_2ft': SWEEP, 'room_dark': (0,),
-              'room_fluorescent': (0,)}
-SAMPLES, REPEATS, SETTLE = 60, 2, 5
-CLOSED_LOOP_EPISODES = 30
 RING = (0, 1, 2, 3, 4, 5, 6, 7)          # sensors in order around the body: adjacent pairs
 
-
-# --- the robot ----------------------------------------------------------------------
-
-class PaperSensorNoise(SensorNoise):
-    """Sensor noise with getnoise's truncation toward zero, as the paper's C code does."""
-
-    def apply(self, level, z, rows):
-        from scipy.special import ndtr
-        u = ndtr(z[:, SENSOR_DRAWS])
-        return level + np.trunc((2.0 * u - 1.0) * self.level * level)
-
-
-def _truncates() -> bool:
-    probe = SensorNoise(0.02).apply(np.full((1, 8), 50.3), np.full((1, emu.DRAWS), 0.8),
-                                    np.array([0]))
-    return bool(np.allclose(probe - 50.3, np.round(probe - 50.3)))
-
-
-def robot(config: emu.EffectsConfig, seed: int, robots: int = 1) -> EmulatedWorld:
-    """The emulated robot(s); their own noise made the paper's getnoise if it is not.
-
-    The emulator's sensor noise is uniform +-2% of the reading, rounded; the paper's
-    getnoise truncates toward zero.  With rounding the simulator's noise is 8-45% less
-    spread than the robot's (most at bright readings), a real gap the benchmark's
-    ``none`` cases must not contain, so the benchmark's robot truncates as the paper does.
-    """
-    world = EmulatedWorld(config, seed=seed, robots=robots)
-    if not _truncates():
-        chain = world._chain.chain          # the emulator has no setting for this
-        for i, process in enumerate(chain):
-            if type(process) is SensorNoise:
-                chain[i] = PaperSensorNoise(process.level)
-    return world
-
-
-def _manifest(protocol: str, conditions, genome=None) -> dict:
-    m = {'format': FORMAT, 'source': 'emulator', 'sample_period_s': 1.0, 'protocol': protocol,
-         'conditions': {c: dataclasses.asdict(CONDITIONS[c]) for c in conditions}}
-    if genome is not None:
-        m['genome'] = [float(g) for g in genome]
-    return m
-
-
-def record_stationary(world: EmulatedWorld, plan=STATIONARY, samples=SAMPLES,
-                      repeats=REPEATS, settle=SETTLE) -> Recording:
-    """Readings at fixed headings.  An episode is one condition: the lamp is set, the
-    sensors settle, then the robot is turned from heading to heading and read
-    ``samples`` times at each, without a pause (so a slow sensor shows)."""
-    rows, episode = [], 0
-    for _ in range(repeats):
-        for condition, headings in plan.items():
-            world.set_condition(condition)
-            world.set_bearing(headings[0])
-            for _ in range(settle):
-                world.read(0)
-            t = 0
-            for heading in headings:
-                world.set_bearing(heading)
-                for _ in range(samples):
-                    rows.append((episode, t, heading, condition, world.read(0)))
-                    t += 1
-            episode += 1
-    return _recording(rows, _manifest('stationary', plan))
-
-
-def record_closed_loop(world: EmulatedWorld, genome, condition='task',
-                       episodes=CLOSED_LOOP_EPISODES, task=Task(), seed=0,
-                       headings: bool = False) -> Recording:
-    """The task on the robot as the hardware bridge runs it (``KheperaRobots``: knocks
-    made by the wheels every ``perturb_every`` steps); headings are not recorded, as a
-    real robot does not know them (``headings``: kept, the lamp's bearing, as from a
-    tracked robot).  The experimenter faces the robot to the lamp before
-    each episode."""
-    weights = network.unpack(np.asarray(genome)[None])
-    robots = KheperaRobots(InProcessRobots(world), CONDITIONS[condition].world(), task)
-    seeds = np.random.SeedSequence(seed).generate_state(episodes, np.uint32)
-    rows = []
-    for e, episode_seed in enumerate(seeds):
-        readings = robots.reset([int(episode_seed)], bearing_deg=0.0)
-        t = 0
-        while readings is not None:
-            direction, power = network.act(weights, readings.astype(np.float32))
-            heading = float(robots.bearing_deg[0]) if headings else math.nan
-            rows.append((e, t, heading, condition, readings[0].copy(), int(direction[0]),
-                         int(power[0])))
-            readings = robots.step(direction, power)
-            t += 1
-    return _recording(rows, _manifest('closed_loop', [condition], genome))
-
-
-def _recording(rows, manifest) -> Recording:
-    n = len(rows)
-    turns = [r[5:] if len(r) > 5 else (math.nan, math.nan) for r in rows]
-    return Recording(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                     np.array([r[2] for r in rows], float), np.array([r[3] for r in rows]),
-                     np.array([r[4] for r in rows], float).reshape(n, 8),
-                     np.array([t[0] for t in turns], float),
-                     np.array([t[1] for t in turns], float), manifest)
-
-
-# --- the cases ----------------------------------------------------------------------
 
 def _arc(rng, low: int, high: int) -> tuple:
     """Adjacent sensors around the body, ``low``..``high`` of them."""
@@ -270,15 +160,6 @@ def reality(config: emu.EffectsConfig, seed: int, condition: str = 'task'):
 
 
 # --- the run ------------------------------------------------------------------------
-
-def evolved_genome(seed: int) -> np.ndarray:
-    """The controller the closed-loop recordings run: evolved in the simulator."""
-    evaluate = CoreEvaluator(noise=NoiseModel.independent_only(SENSOR_NOISE))
-    eas = [evolution.SteadyStateEA(evolution.EAConfig(population=25, generations=30), s)
-           for s in np.random.SeedSequence(seed).generate_state(4)]
-    evolution.evolve(eas, evaluate)
-    return max(eas, key=lambda e: e.best_fitness).best_genome
-
 
 TRANSFER_ANSWERS = ('actuator_turn_error', 'sensor_latency')   # effects that act in the loop
 TRANSFER_EA = evolution.EAConfig(population=15, generations=20)
