@@ -2,7 +2,7 @@
 
     python benchmark/transfer_loop.py [ROBOT ...] [--trials 10] [--test-episodes 10]
         [--jobs 2] [--seed 26] [--out benchmark/transfer_loop.json] [--no-progress]
-        [--protocols identify|section2]
+        [--protocols identify|section2] [--untracked]
 
 ROBOT is ``emulator`` (the emulated robot, config/emulator.yaml) or a foreign robot
 (benchmark/foreign/robots, docs/foreign-robots.md); the default is the emulator and the
@@ -97,6 +97,8 @@ def loop(name: str, shared: dict, args, out: Path, tell=None) -> dict:
         world = world_of(name, 1, 0)
         recordings[:1] = [identify.sweep(world, args.seed),
                           identify.turn_calibration(world, args.seed + 2000)]
+        if args.untracked:      # as a real Khepera records: headings at placements only
+            recordings[1:] = [identify.untracked(r) for r in recordings[1:]]
     tell(name, STAGES[0])
     spent = {'record': time.process_time() - cpu}
     config = simconfig.SimConfig()
@@ -174,6 +176,9 @@ def main(argv=None) -> int:
     p.add_argument('--diagnoses', type=Path, default=Path('results/transfer_loop'),
                    help="each robot's diagnosis.json and fitted params")
     p.add_argument('--no-progress', action='store_true')
+    p.add_argument('--untracked', action='store_true',
+                   help='headings known only where the robot was placed, as a real Khepera '
+                        'records (turns inferred through the sweep)')
     p.add_argument('--protocols', choices=('identify', 'section2'), default='identify',
                    help='identify: the heading sweep and the turn calibration (record '
                         '--protocol sweep / turns) beside the closed loop; section2: the '
@@ -232,7 +237,8 @@ def main(argv=None) -> int:
           f'{os.cpu_count()} cores; CPU by stage over the robots: '
           + ', '.join(f'{k} {v:.0f} s' for k, v in stages.items()) + ')')
     args.out.write_text(json.dumps({
-        'seed': args.seed, 'protocols': args.protocols, 'trials': args.trials,
+        'seed': args.seed, 'protocols': args.protocols, 'untracked': args.untracked,
+        'trials': args.trials,
         'test_episodes': args.test_episodes,
         'wall_s': elapsed, 'cpu_s': total_cpu, 'jobs': args.jobs, 'summary': summary,
         'robots': results}, indent=1, default=float) + '\n')
