@@ -19,10 +19,12 @@ import signal
 import subprocess
 import sys
 import threading
+from types import FrameType
 
 PR_SET_PDEATHSIG = 1
 PARENT_ENV = 'KHEPERA_NOISE_PARENT_PID'   # the portable fallback for exec'd children
 POLL_S = 0.25
+RESEND_S = 0.02         # a SIGTERM that came inside rclpy's future callbacks, sent again
 
 # Run by the child between fork and exec (see popen): arm the death signal, check the
 # parent is still the one that started us, then become the command.  No package import.
@@ -107,11 +109,23 @@ def popen(args: list[str], sig: int = signal.SIGKILL, **kwargs) -> subprocess.Po
     return subprocess.Popen(wrapped, env=env, **kwargs)
 
 
+def _in_future_callbacks(frame: FrameType | None) -> bool:
+    """Is ``frame`` inside rclpy's future machinery (a done callback being scheduled)?"""
+    while frame is not None:
+        if frame.f_code.co_filename.endswith(os.path.join('rclpy', 'task.py')):
+            return True
+        frame = frame.f_back
+    return False
+
+
 @contextlib.contextmanager
 def terminate_as_interrupt():
     """While inside, SIGTERM stops the main thread as Ctrl-C does (``KeyboardInterrupt``),
     so a plain ``kill`` saves what Ctrl-C saves."""
     def interrupt(signum, frame):
+        if _in_future_callbacks(frame):     # rclpy would log it as a failed callback:
+            threading.Timer(RESEND_S, os.kill, (os.getpid(), signum)).start()   # again soon
+            return
         raise KeyboardInterrupt
     try:
         previous = signal.signal(signal.SIGTERM, interrupt)

@@ -130,3 +130,23 @@ def test_sigkill_of_a_command_leaves_none_of_its_processes(name, tmp_path):
         for pid in alive(recorded if 'recorded' in locals() else {}):
             os.kill(pid, signal.SIGKILL)            # what it left behind
         kill(proc)
+
+
+def test_a_sigterm_inside_rclpy_s_future_callbacks_is_sent_again_not_raised_there(
+        monkeypatch):
+    """Raised inside rclpy's task machinery the interrupt would be logged as a failed
+    callback with its traceback; it is sent again a moment later instead."""
+    import threading
+    from khepera_noise_ros import lifeline
+    space: dict = {}
+    exec(compile('import sys\nframe = sys._getframe()', os.path.join('rclpy', 'task.py'),
+                 'exec'), space)
+    sent = threading.Event()
+    monkeypatch.setattr(os, 'kill', lambda pid, sig: sent.set()
+                        if (pid, sig) == (os.getpid(), signal.SIGTERM) else None)
+    with lifeline.terminate_as_interrupt():
+        handler = signal.getsignal(signal.SIGTERM)
+        handler(signal.SIGTERM, space['frame'])          # inside rclpy/task.py: no raise
+        assert sent.wait(2.0)
+        with pytest.raises(KeyboardInterrupt):
+            handler(signal.SIGTERM, sys._getframe())      # anywhere else: as Ctrl-C
