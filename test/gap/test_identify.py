@@ -15,6 +15,7 @@ from khepera_noise_ros.gap.replay import Replayer
 from khepera_noise_ros.gap.target import Target
 from khepera_noise_ros.recording import FORMAT, Recording
 from khepera_noise_ros.testing import protocols
+from khepera_noise_ros.testing.protocols import turn_calibration
 from khepera_noise_ros import simconfig
 
 CONFIG = simconfig.SimConfig(noise=NoiseModel.independent_only(0.02))
@@ -43,21 +44,6 @@ def sweep(step: float = 10.0, samples: int = 10) -> Recording:
                       for t in range(samples)], 'stationary', {'bulb_1ft': TASK})
 
 
-def calibration(repeats: int = 3, rest: int = 10) -> Recording:
-    """The record command's turn calibration (headings known at the placements)."""
-    rows, episode = [], 0
-    for _ in range(repeats):
-        for power in range(1, 10):
-            for t in range(rest * 5):
-                k = (t + 1) // rest - 1
-                turn = (t + 1) % rest == 0 and k < 4
-                rows.append((episode, t, -power * 1.5 if t == 0 else np.nan, 'turns_task',
-                             (1 if k % 2 == 0 else -1) if turn else 1, power if turn else 0))
-            episode += 1
-    return recording(rows, 'closed_loop', {'turns_task': TASK}, calibration='turns',
-                     task={'steps': rest * 5, 'perturb_every': 5, 'perturbation_deg': 0.0})
-
-
 def closed_loop(episodes: int = 16) -> Recording:
     return recording([(e, t, np.nan, 'task', 1, 1) for e in range(episodes)
                       for t in range(60)], 'closed_loop', {'task': TASK}, genome=GENOME)
@@ -78,7 +64,7 @@ def statistics(rec: Recording) -> dict:
 
 
 def test_the_calibration_replays_its_commands_from_its_placements():
-    rec = recorded(calibration(repeats=1))
+    rec = recorded(turn_calibration(repeats=1))
     first = rec.step == 0
     np.testing.assert_array_equal(rec.heading_deg[first], -1.5 * np.arange(1, 10))
     turned = np.flatnonzero(rec.power > 0)
@@ -88,26 +74,26 @@ def test_the_calibration_replays_its_commands_from_its_placements():
 
 
 def test_the_turn_per_command_and_the_settling_are_compared_where_they_can_be():
-    tracked = statistics(recorded(calibration(), [ACTUATOR]))
+    tracked = statistics(recorded(turn_calibration(), [ACTUATOR]))
     turn = {k.part: v for k, v in tracked.items() if k.family == 'turn_by_command'}
     assert len(turn) == 18
     assert turn['right 9'] == pytest.approx(0.9 * 1.25 * 24.0, abs=0.3)
     assert turn['left 9'] == pytest.approx(-0.9 * 0.75 * 24.0, abs=0.3)
     assert turn['right 1'] == 0.0                  # a turn inside the dead-band
     assert any(k.family == 'turn_step_response' for k in tracked)
-    untracked = statistics(recorded(calibration(), [ACTUATOR], tracked=False))
+    untracked = statistics(recorded(turn_calibration(), [ACTUATOR], tracked=False))
     assert not any(k.family == 'turn_by_command' for k in untracked)
     assert sum(k.family == 'turn_imbalance' for k in untracked) == 18
 
 
 def test_turns_are_measured_where_headings_are_known_and_inferred_through_a_sweep():
-    loop = recorded(calibration(), [ACTUATOR], tracked=False)
+    loop = recorded(turn_calibration(), [ACTUATOR], tracked=False)
     assert turns.measured([loop], [], CONFIG).shape == (0, 2)     # nothing to infer with
     made = turns.measured([loop], [recorded(sweep())], CONFIG)
     assert made.shape == (108, 2)
     error = np.abs(made[:, 1] - ACTUATOR.mean(made[:, 0]))
     assert error.mean() < 0.6 and error.max() < 3.0, error
-    tracked = turns.measured([recorded(calibration(), [ACTUATOR])], [], CONFIG)
+    tracked = turns.measured([recorded(turn_calibration(), [ACTUATOR])], [], CONFIG)
     np.testing.assert_allclose(tracked[:, 1], ACTUATOR.mean(tracked[:, 0]), atol=0.2)
 
 
@@ -118,7 +104,7 @@ def test_the_diagnosis_identifies_the_world_before_the_noise():
         500 - 420 * np.exp(-np.log(2) * (np.abs(d - 10) / 20) ** 2),
         500 - 420 * np.exp(-np.log(2) * (np.abs(d + 10) / 20) ** 2)], 2)))
     truth = [light, SensorResponse(tuple(range(8)), 0.0, 0.5, 0.5), ACTUATOR]
-    recordings = [recorded(sweep(), truth, seed=1), recorded(calibration(), truth, seed=2),
+    recordings = [recorded(sweep(), truth, seed=1), recorded(turn_calibration(), truth, seed=2),
                   recorded(closed_loop(), truth, seed=3)]
     result = diagnose.diagnose(recordings, diagnose.Options(
         config=CONFIG, replicates=60, remainder=False, rounding=False))
