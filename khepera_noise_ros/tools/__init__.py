@@ -1,1 +1,2 @@
-"""Maintenance tools: ``param_docs`` writes docs/parameters.md from the nodes' descriptors."""
+"""Maintenance tools: ``param_docs`` and ``effect_docs`` write docs/parameters.md and
+docs/effects.md (``generated``: write a page, or check it is current)."""

@@ -9,7 +9,6 @@ it: test/test_docs.py fails when the committed page differs.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import inspect
 import json
@@ -17,6 +16,7 @@ import sys
 from pathlib import Path
 
 from ..effects import NAMES, REGISTRY, WORLD_MODEL, Effect
+from . import generated
 
 PAGE = Path(__file__).resolve().parents[2] / 'docs' / 'effects.md'
 STAGES = {'world': 'the light at each bearing, where the world\'s table is made',
@@ -67,20 +67,9 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else '')
-    parser.add_argument('--check', action='store_true',
-                        help='exit 1 if the page differs from what the registry gives')
-    parser.add_argument('--output', type=Path, default=PAGE)
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        if not args.output.exists() or args.output.read_text() != text:
-            print(f'{args.output} is out of date: run python -m '
-                  'khepera_noise_ros.tools.effect_docs', file=sys.stderr)
-            return 1
-        return 0
-    args.output.write_text(text)
-    return 0
+    return generated.main(render, PAGE, 'khepera_noise_ros.tools.effect_docs',
+                          'the registry gives',
+                          __doc__.splitlines()[0] if __doc__ else '', argv)
 
 
 if __name__ == '__main__':

@@ -8,7 +8,6 @@ from the code: test/project/test_docs.py fails when the committed page differs.
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 import sys
 
@@ -21,6 +20,7 @@ from ..nodes.params import Spec
 from ..nodes.robot_node import ROBOT_SPECS
 from ..nodes.robot_view import VIEW_SPECS
 from ..nodes.simulator import Simulator
+from . import generated
 
 PAGE = Path(__file__).resolve().parents[2] / 'docs' / 'parameters.md'
 SECTIONS = (
@@ -82,22 +82,10 @@ def render() -> str:
     return '\n'.join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--check', action='store_true',
-                        help='exit 1 if the page differs from what the descriptors give')
-    parser.add_argument('--output', type=Path, default=PAGE)
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        current = args.output.read_text() if args.output.exists() else ''
-        if current != text:
-            print(f'{args.output} is out of date: run python -m '
-                  'khepera_noise_ros.tools.param_docs', file=sys.stderr)
-            return 1
-        return 0
-    args.output.write_text(text)
-    return 0
+def main(argv: list[str] | None = None) -> int:
+    return generated.main(render, PAGE, 'khepera_noise_ros.tools.param_docs',
+                          'the descriptors give',
+                          __doc__.splitlines()[0] if __doc__ else '', argv)
 
 
 if __name__ == '__main__':
