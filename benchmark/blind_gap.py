@@ -32,6 +32,7 @@ os.environ.setdefault('OMP_NUM_THREADS', '1')
 import numpy as np  # noqa: E402
 
 from khepera_noise_ros.core import evolution  # noqa: E402
+from khepera_noise_ros.core.evaluation import episode_fitness  # noqa: E402
 from khepera_noise_ros.core.noise import NoiseModel  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.experiment import transfer  # noqa: E402
@@ -153,7 +154,7 @@ def reality(config: emu.EffectsConfig, seed: int, condition: str = 'task'):
         bodies = robot(config, seed, len(seeds))
         env = KheperaRobots(InProcessRobots(bodies), world, Task())
         try:
-            return transfer.fitness(env, genomes, seeds)
+            return episode_fitness(env, genomes, seeds)
         finally:
             env.close()
     return evaluate

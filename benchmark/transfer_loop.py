@@ -41,9 +41,9 @@ for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(var, '1')
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import numpy as np  # noqa: E402
 
 from khepera_noise_ros import simconfig  # noqa: E402
+from khepera_noise_ros.core.evaluation import episode_fitness  # noqa: E402
 from khepera_noise_ros.core.khepera import World  # noqa: E402
 from khepera_noise_ros.core.task import Task  # noqa: E402
 from khepera_noise_ros.experiment import transfer, transfer_stats  # noqa: E402
@@ -78,9 +78,7 @@ def reality_of(name: str, salt: int):
     env = KheperaRobots(InProcessRobots(world_of(name, CAPACITY, salt)), World(), Task())
 
     def evaluate(genomes, seeds):
-        return np.concatenate([transfer.fitness(env, genomes[lo:lo + CAPACITY],
-                                                seeds[lo:lo + CAPACITY])
-                               for lo in range(0, len(seeds), CAPACITY)])
+        return episode_fitness(env, genomes, seeds, CAPACITY)
     return evaluate
 
 

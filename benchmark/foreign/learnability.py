@@ -17,11 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from khepera_noise_ros.core import network
-from khepera_noise_ros.core.evaluation import CoreEvaluator
+from khepera_noise_ros.core.evaluation import CoreEvaluator, episode_fitness
 from khepera_noise_ros.core.evolution import PHASE1, EAConfig, SteadyStateEA, evolve
 from khepera_noise_ros.core.khepera import World
-from khepera_noise_ros.core.task import Task, step_fitness
+from khepera_noise_ros.core.task import Task
 from khepera_noise_ros.reality.khepera_robot import InProcessRobots, KheperaRobots
 
 from .robot import ForeignWorld
@@ -33,19 +32,6 @@ MARGIN = 0.02
 LEVEL = 0.95
 EA = dataclasses.replace(PHASE1, best='retest', retest_episodes=5)
 CAPACITY = 256            # copies of the robot driven at once
-
-
-def episodes(env, genomes: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-    """Fitness of one episode per genome on ``env`` (the ``core.task.Episodes`` interface)."""
-    weights = network.unpack(genomes)
-    readings = env.reset(np.asarray(seeds, np.int64))
-    total, steps = np.zeros(len(seeds)), 0
-    while readings is not None:
-        direction, power = network.act(weights, readings)
-        total += step_fitness(readings, power)
-        steps += 1
-        readings = env.step(direction, power)
-    return total / max(steps, 1)
 
 
 @dataclass
@@ -62,9 +48,7 @@ class RobotEvaluator:
                                                               self.seed)), World(), self.task)
 
     def __call__(self, genomes, seeds) -> np.ndarray:
-        return np.concatenate([episodes(self.env, genomes[lo:lo + CAPACITY],
-                                        seeds[lo:lo + CAPACITY])
-                               for lo in range(0, len(seeds), CAPACITY)])
+        return episode_fitness(self.env, genomes, seeds, CAPACITY)
 
 
 def evolve_bests(evaluate, seeds: np.random.SeedSequence, trials: int,

@@ -9,10 +9,9 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-import numpy as np
-
 from .. import simconfig
 from ..core import evolution
+from ..core.evaluation import episode_fitness
 from ..experiment import transfer, transfer_report, transfer_stats
 from ..files import atomic_write_text, write_json
 
@@ -99,11 +98,7 @@ def robot(args, world, config: simconfig.SimConfig):
 
 
 def _chunked(env, capacity: int):
-    def evaluate(genomes, seeds):
-        return np.concatenate([transfer.fitness(env, genomes[lo:lo + capacity],
-                                                seeds[lo:lo + capacity])
-                               for lo in range(0, len(seeds), capacity)])
-    return evaluate
+    return lambda genomes, seeds: episode_fitness(env, genomes, seeds, capacity)
 
 
 class Bar:

@@ -26,9 +26,9 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..core import evolution, network
+from ..core import evolution
 from ..core.noise import NoiseModel
-from ..core.task import step_fitness
+from ..core.evaluation import episode_fitness
 from ..effects.simulate import EffectEpisodes
 from ..simconfig import SimConfig
 from .protocol import episodes_per_run
@@ -63,21 +63,6 @@ class _Quiet:
         pass
 
 
-def fitness(env, genomes, seeds) -> np.ndarray:
-    """Mean step fitness of one episode per genome on ``env``: anything with the
-    ``core.task.Episodes`` interface (the simulator, or robots behind ``KheperaRobots``)."""
-    weights = network.unpack(genomes)
-    readings = env.reset(np.asarray(seeds, np.int64))
-    total = np.zeros(len(seeds))
-    steps = 0
-    while readings is not None:
-        direction, power = network.act(weights, readings)
-        total += step_fitness(readings, power)
-        steps += 1
-        readings = env.step(direction, power)
-    return total / max(steps, 1)
-
-
 @dataclass
 class SimEvaluator:
     """(genomes, seeds) -> fitness in the simulator of ``config``: one episode per genome."""
@@ -86,8 +71,8 @@ class SimEvaluator:
 
     def __call__(self, genomes, seeds) -> np.ndarray:
         c = self.config
-        return fitness(EffectEpisodes(c.world, c.noise, c.task, tuple(c.effects)), genomes,
-                       seeds)
+        return episode_fitness(EffectEpisodes(c.world, c.noise, c.task, tuple(c.effects)),
+                               genomes, seeds)
 
 
 def paper_models() -> dict[str, NoiseModel]:
