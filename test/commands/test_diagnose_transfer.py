@@ -1,6 +1,7 @@
 """`diagnose --transfer-*` with the measured protocol (do no harm, a robot that stops, the
 ports), and the diagnosed condition of `replicate` and `sweep` (--params)."""
 import json
+import os
 from contextlib import contextmanager
 
 import numpy as np
@@ -97,6 +98,9 @@ def test_transfer_port_tests_on_the_robots_there_and_a_robot_that_stops_is_named
     fitting(monkeypatch, BENIGN)
     real_robot = _transfer.robot
     with EmulatorProcess(EmulatedWorld(seed=4, robots=2, start_bearing_deg=0.0)) as emulator:
+        # an open slave keeps each pty's number taken once the robots go: another worker's
+        # new pty cannot take the name this command keeps retrying
+        held = [os.open(port, os.O_RDWR | os.O_NOCTTY) for port in emulator.ports]
         calls = []
 
         @contextmanager
@@ -110,9 +114,13 @@ def test_transfer_port_tests_on_the_robots_there_and_a_robot_that_stops_is_named
                 yield reality, where
         monkeypatch.setattr(_transfer, 'robot', stopping)
         out = tmp_path / 'out'
-        code = cli.main(['diagnose', *recorded, '--out', str(out), *FAST, '--transfer-port',
-                         *emulator.ports, '--transfer-trials', '2',
-                         '--transfer-test-episodes', '2'])
+        try:
+            code = cli.main(['diagnose', *recorded, '--out', str(out), *FAST,
+                             '--transfer-port', *emulator.ports, '--transfer-trials', '2',
+                             '--transfer-test-episodes', '2'])
+        finally:
+            for fd in held:
+                os.close(fd)
     assert code == 1
     err = [line for line in capsys.readouterr().err.splitlines() if 'error:' in line]
     assert len(err) == 1 and emulator.ports[0] in err[0]
