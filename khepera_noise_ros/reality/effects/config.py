@@ -361,21 +361,6 @@ def _checked(name: str, e):
     return dataclasses.replace(e, **changes) if changes else e
 
 
-# The robot that stands in for the paper's Khepera (config/emulator.yaml is a copy): the
-# room's flicker, drift and group noise of section 2, a unit's calibration, a quarter of a
-# step of latency, and wheels with a dead band and unequal motors (docs/calibration.md).
-REAL_ROBOT = EffectsConfig(
-    sensor_noise=0.01,
-    correlated_noise=CorrelatedNoise(enabled=True, strength=0.003,
-                                     location=((0, 1, 2), (3, 4, 5), (6, 7))),
-    intensity_dependent_noise=IntensityDependentNoise(enabled=True, strength=0.06,
-                                                      exponent=2.0),
-    sensor_gain_offset=SensorGainOffset(enabled=True, strength=0.05, offset_sd=5.0),
-    temporal_drift=TemporalDrift(enabled=True, strength=0.004, time_constant=50.0),
-    actuator_turn_error=ActuatorTurnError(enabled=True, strength=0.1, scale=0.92,
-                                          asymmetry=0.3, dead_band=3.0),
-    sensor_latency=SensorLatency(enabled=True, strength=0, fraction=0.25),
-)
 # The default robot before issue 27 (config/emulator_v1.yaml is a copy): a whole step of
 # latency and a 10% gain spread; it opens a drop that training on it cannot recover.
 REAL_ROBOT_V1 = EffectsConfig(
@@ -388,6 +373,16 @@ REAL_ROBOT_V1 = EffectsConfig(
     temporal_drift=TemporalDrift(enabled=True, strength=0.004, time_constant=50.0),
     actuator_turn_error=ActuatorTurnError(enabled=True, strength=0.1, scale=0.92),
     sensor_latency=SensorLatency(enabled=True, strength=1),
+)
+# The robot that stands in for the paper's Khepera (config/emulator.yaml is a copy): the
+# same room (flicker, drift and group noise of section 2), a unit's calibration, a quarter
+# of a step of latency, and wheels with a dead band and unequal motors (docs/calibration.md).
+REAL_ROBOT = dataclasses.replace(
+    REAL_ROBOT_V1,
+    sensor_gain_offset=SensorGainOffset(enabled=True, strength=0.05, offset_sd=5.0),
+    actuator_turn_error=ActuatorTurnError(enabled=True, strength=0.1, scale=0.92,
+                                          asymmetry=0.3, dead_band=3.0),
+    sensor_latency=SensorLatency(enabled=True, strength=0, fraction=0.25),
 )
 BASES = {'real_robot': REAL_ROBOT, 'real_robot_v1': REAL_ROBOT_V1,
          'none': EffectsConfig.none()}
