@@ -79,5 +79,4 @@ def test_stop_ends_a_run_after_its_checkpoint_and_a_restart_resumes_it(
         worker = [s for s in health() if 'worker' in s.name][-1]
         assert worker.level == DiagnosticStatus.OK and worker.message == 'in the pool'
         assert int({kv.key: kv.value for kv in worker.values}['episodes']) > 0
-        graph.executor.remove_node(user)
-        user.destroy_node()
+    user.destroy_node()         # once the graph's executor has stopped spinning it
