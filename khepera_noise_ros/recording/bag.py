@@ -138,8 +138,9 @@ def read_bag(path: StrPath) -> Recording:
             parsed = _Parsed(path, topics)
             for connection, _, raw in reader.messages(list(topics.values())):
                 parsed.add(connection, store.deserialize_cdr(raw, connection.msgtype))
+    # damaged (rosbags meets a mistyped metadata value, a string duration, as TypeError)
     except (rosbag2.ReaderError, SerdeError, struct.error, AssertionError, KeyError,
-            IndexError, ValueError, MemoryError, OverflowError, EOFError) as exc:  # damaged
+            IndexError, ValueError, TypeError, MemoryError, OverflowError, EOFError) as exc:
         if isinstance(exc, RecordingError):
             raise
         raise RecordingError(f'{path}: not a readable rosbag2 recording: '

@@ -57,6 +57,17 @@ def test_closed_loop_round_trips_through_csv_and_mcap_bag(tmp_path):
     assert from_bag.manifest['genome'] == pytest.approx(rec.manifest['genome'])
 
 
+def test_a_bag_whose_metadata_has_a_mistyped_value_is_refused_in_one_line(tmp_path):
+    bag = write_bag(closed_loop(), tmp_path / 'loop_bag')
+    meta = bag / 'metadata.yaml'
+    data = yaml.safe_load(meta.read_text())
+    data['rosbag2_bagfile_information']['duration']['nanoseconds'] = 'long'
+    meta.write_text(yaml.safe_dump(data))
+    with pytest.raises(RecordingError, match='loop_bag: not a readable rosbag2 recording') as e:
+        read_bag(bag)
+    assert '\n' not in str(e.value)
+
+
 def test_bag_messages_are_the_graph_protocol(tmp_path):
     """A bag written without ROS decodes with rclpy and the live topic contract."""
     from rclpy.serialization import deserialize_message
