@@ -18,7 +18,7 @@ import numpy as np
 from scipy import stats as sps
 from scipy.optimize import nnls
 
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, param
+from .base import Array, Candidate, Effect, Evidence, Stage, param
 from .fitting import ALPHA, CLOSED_LOOP
 
 BANDS = np.round(np.arange(0.0, 8.0001, 0.1), 1)     # dead-bands tried, degrees
@@ -27,15 +27,12 @@ TINY = 1e-9           # weighted squared residual per turn below which a fit gai
 
 
 @dataclass(frozen=True)
-class ActuatorResponse(Effect):
+class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, free=4,
+                       summary='the turn made differs in form: dead-band, sides, size, scatter'):
     """A commanded turn of x degrees (positive to the right) turns sign(x) gain (1 +- a)
     scale(|x|) max(|x| - dead_band, 0) (1 + scatter N) + jitter N degrees (+ to the
     right); no turn is made of a zero command."""
 
-    name: ClassVar[str] = 'actuator_response'
-    stage: ClassVar[Stage] = Stage.ACTUATOR
-    free: ClassVar[int] = 4
-    summary: ClassVar[str] = 'the turn made differs in form: dead-band, sides, size, scatter'
     wheel_knocks: ClassVar[bool] = True
     dead_band: float = param(0.0, 'degrees of each turn the wheels do not make', low=0.0,
                              high=45.0)
@@ -64,23 +61,14 @@ class ActuatorResponse(Effect):
         result: Array = out
         return result
 
-    def _made(self, deg: Array, z: Array | None) -> Array:
-        out = self.mean(deg)
-        if z is not None:
-            out = out + (self.scatter * np.abs(out) * z[0] + self.jitter * z[1]) * (deg != 0)
-        return out
-
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        random = bool(self.scatter or self.jitter)
-        return lambda deg: self._made(deg, rng.standard_normal((2,) + np.shape(deg))
-                                      if random else None)
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         """Commanded turns (samples, 1, robots) in degrees, made."""
-        if not (self.scatter or self.jitter):
-            return self._made(level, None)
-        z = rng.standard_normal((level.shape[0], 2) + level.shape[2:])
-        return self._made(level, np.moveaxis(z, 1, 0)[:, :, None])
+        out = self.mean(level)
+        if self.scatter or self.jitter:
+            z = rng.standard_normal((level.shape[0], 2) + level.shape[1:])
+            out = out + (self.scatter * np.abs(out) * z[:, 0] + self.jitter * z[:, 1]) \
+                * (level != 0)
+        return out
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:

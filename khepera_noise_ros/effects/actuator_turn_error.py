@@ -10,11 +10,11 @@ golden-section search, one after the other; a plain value is kept where it fits 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar
+from typing import Callable
 
 import numpy as np
 
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, param
+from .base import Array, Candidate, Effect, Evidence, Stage, param
 from .fitting import CLOSED_LOOP, Z_DETECT, golden
 
 SCATTER = ('turn_scatter', 'turn_size_scatter')
@@ -26,31 +26,20 @@ SAME = 0.02               # relative objective within which the simpler value is
 
 
 @dataclass(frozen=True)
-class ActuatorTurnError(Effect):
+class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR, free=2,
+                        summary='a turn command produces a different rotation than modelled'):
     """A commanded rotation of x degrees turns x * scale + slip * |x| * N(0, 1) + creep *
     N(0, 1) degrees (the creep turns the robot even at power 0).  With ``knocks`` the
     task's heading knocks are scaled too: on a robot the wheels make them."""
 
-    name: ClassVar[str] = 'actuator_turn_error'
-    stage: ClassVar[Stage] = Stage.ACTUATOR
-    free: ClassVar[int] = 2
-    summary: ClassVar[str] = 'a turn command produces a different rotation than modelled'
     scale: float = param(1.0, 'executed over commanded rotation')
     slip: float = param(0.0, 'sd of a random slip per degree turned', low=0.0)
     knocks: bool = param(True, 'the task\'s heading knocks are scaled too')
     creep: float = param(0.0, 'sd of a slip of fixed size, degrees per step', low=0.0)
 
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        def turn(deg: Array) -> Array:
-            out = deg * self.scale + self.slip * np.abs(deg) * rng.standard_normal(np.shape(deg))
-            if self.creep:       # drawn only when set: older effects keep their streams
-                out = out + self.creep * rng.standard_normal(np.shape(deg))
-            out_: Array = out
-            return out_
-        return turn
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         """Commanded turns (samples, 1, robots) in degrees, executed."""
+        # the creep drawn only when set: older effects keep their streams
         draws = rng.standard_normal((level.shape[0], 2 if self.creep else 1) + level.shape[2:])
         out = level * self.scale + self.slip * np.abs(level) * draws[:, :1]
         if self.creep:

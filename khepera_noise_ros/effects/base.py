@@ -106,6 +106,14 @@ class Effect:
     free: ClassVar[int]       # free parameters beyond the location, for the parsimony rule
     summary: ClassVar[str]    # one line for the effect catalogue
 
+    def __init_subclass__(cls, name: str | None = None, stage: Stage | None = None,
+                          free: int | None = None, summary: str | None = None) -> None:
+        """An effect declares the four above as class keywords (or keeps its parent's)."""
+        super().__init_subclass__()
+        for key, value in dict(name=name, stage=stage, free=free, summary=summary).items():
+            if value is not None:
+                setattr(cls, key, value)
+
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             spec, value = f.metadata['param'], getattr(self, f.name)
@@ -135,13 +143,20 @@ class Effect:
         return list(self.sensors)
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        """A fresh state for ``robots`` episodes: a function of one sample."""
-        raise NotImplementedError
+        """A fresh state for ``robots`` episodes: a function of one sample (by default
+        ``act`` on it, which is right for an effect that keeps nothing between samples)."""
+        rows(self.sensors, channels)
+        if self.stage is Stage.ACTUATOR:       # a sample: the robots' turns, of any shape
+            return lambda deg: self.act(np.reshape(deg, (1, 1, -1)), rng).reshape(np.shape(deg))
+        return lambda level: self.act(level[None], rng)[0]
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
-        """``start`` over (samples, channels, robots) at once (overridden by faster paths)."""
-        step = self.start(level.shape[2], level.shape[1], rng)
-        return np.stack([step(level[t]) for t in range(level.shape[0])])
+        """``start`` over (samples, channels, robots) at once: the same numbers."""
+        return self.act(level, rng)
+
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
+        """A memoryless effect on (samples, channels, robots), its draws sample by sample."""
+        raise NotImplementedError
 
     def table(self, table: Array, world: Any) -> Array:
         """A world-stage effect: the (channels, tenths of a degree) light table of

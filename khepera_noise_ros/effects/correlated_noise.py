@@ -11,27 +11,24 @@ shared noise of a fixed size in readings (a supply, a converter) is tried as wel
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
 from .fitting import ALPHA, by_condition, names, refine
 
 THRESHOLD = 4.0
 
 
 @dataclass(frozen=True)
-class CorrelatedNoise(Effect):
+class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1,
+                      summary='fast noise shared within groups of sensors (dependence groups)'):
     """Normal noise shared within each group, sd ``strength`` x the group's mean level (the
     paper's dependent noise) plus ``constant`` readings whatever the level."""
 
-    name: ClassVar[str] = 'correlated_noise'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 1
-    summary: ClassVar[str] = 'fast noise shared within groups of sensors (dependence groups)'
     groups: tuple[tuple[int, ...], ...] = param((), 'groups of sensors that share noise',
                                                 'groups')
     strength: float = param(0.01, 'sd as a fraction of the group\'s mean level', low=0.0)
@@ -50,19 +47,7 @@ class CorrelatedNoise(Effect):
         out['groups'] = self.location
         return out
 
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        located = [rows(g, channels) for g in self.groups]
-
-        def step(level: Array) -> Array:
-            out: Array = level.copy()
-            z = rng.standard_normal((len(located), robots))
-            for g, members in enumerate(located):
-                out[members] += (self.strength * level[members].mean(axis=0)
-                                 + self.constant) * z[g]
-            return out
-        return step
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         located = [rows(g, level.shape[1]) for g in self.groups]
         out: Array = level.copy()
         z = rng.standard_normal((level.shape[0], len(located), level.shape[2]))

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -24,16 +23,13 @@ WINDOW = 8        # samples averaged into one value of the slow part
 
 
 @dataclass(frozen=True)
-class EmpiricalNoise(Effect):
+class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
+                     summary='the remainder no named effect explains, as measured'):
     """Fast: per sensor an extra sd interpolated over ``levels`` from ``spread`` (a row of
     knots per sensor), mixed across sensors by the lower triangular ``mixing``.  Slow: an
     AR(1) of ``slow_time_constant`` samples moving each gain by ``slow_sd``, mixed by
     ``slow_mixing``."""
 
-    name: ClassVar[str] = 'empirical_noise'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 99
-    summary: ClassVar[str] = 'the remainder no named effect explains, as measured'
     sensors: tuple[int, ...] = param((), 'sensors of the model', 'sensors')
     levels: tuple[float, ...] = param((0.0, 525.0), 'light levels of the knots', 'floats',
                                       ascending=True)

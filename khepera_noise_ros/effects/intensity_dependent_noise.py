@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import ClassVar, Sequence
+from typing import Sequence
 
 import numpy as np
 from scipy.optimize import nnls
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, held, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, columns, held, param, rows
 from .correlated_noise import groups_of
 from .fitting import Z_DETECT, names, refine
 
@@ -27,14 +27,12 @@ SPREADS = ('spread', 'loop_still_spread', 'loop_residual_spread', 'loop_change_s
 
 
 @dataclass(frozen=True)
-class IntensityDependentNoise(Effect):
+class IntensityDependentNoise(
+        Effect, name='intensity_dependent_noise', stage=Stage.LIGHT, free=2,
+        summary='noise amplitude or correlation that changes with the light level'):
     """Normal noise of sd ``constant + strength * u * (u / scale) ** exponent``; one draw
     for all ``sensors`` at once if ``shared`` (a flicker), else one per sensor."""
 
-    name: ClassVar[str] = 'intensity_dependent_noise'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 2
-    summary: ClassVar[str] = 'noise amplitude or correlation that changes with the light level'
     sensors: tuple[int, ...] = param((), 'sensors with the extra noise', 'sensors')
     strength: float = param(0.03, 'size of the law (sd per reading of u)', low=0.0)
     exponent: float = param(1.0, 'exponent of the law', low=-1.0)
@@ -48,17 +46,7 @@ class IntensityDependentNoise(Effect):
         return self.constant + self.strength * shape(level, self.direction, self.exponent,
                                                      self.scale)
 
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        located = rows(self.sensors, channels)
-
-        def step(level: Array) -> Array:
-            out: Array = level.copy()
-            z = rng.standard_normal(robots if self.shared else (len(located), robots))
-            out[located] += z * self.amplitude(level[located])
-            return out
-        return step
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
         width = 1 if self.shared else len(rows(self.sensors, level.shape[1]))
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))

@@ -11,29 +11,26 @@ sweep gives bearings enough for a shape (else a shape would be a guess).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
 from scipy.interpolate import Akima1DInterpolator
 
 from ..core.khepera import DARK, TENTHS
-from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, param, rows
+from .base import Array, Candidate, Effect, Evidence, Row, Stage, param, rows
 from .fitting import ALPHA, holm, names
 
 SPARSE = 12           # fewer bearings than this round the circle leave the shape a guess
 
 
 @dataclass(frozen=True)
-class LightResponse(Effect):
+class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
+                    summary="each sensor's light over bearing differs in shape from the model's"):
     """``levels[c][s][k]``: sensor ``sensors[s]``'s light at bearing ``bearings[k]`` in the
     condition of lamp distance ``lamps[c]`` and ambient ``ambients[c]``; the world's
     table is kept in conditions it does not list."""
 
-    name: ClassVar[str] = 'light_response'
-    stage: ClassVar[Stage] = Stage.WORLD
-    free: ClassVar[int] = 5
-    summary: ClassVar[str] = "each sensor's light over bearing differs in shape from the model's"
     sensors: tuple[int, ...] = param((0,), 'sensors whose light response is tabled', 'sensors')
     bearings: tuple[float, ...] = param((0.0,), 'knot bearings, degrees', 'floats',
                                         low=-180.0, high=180.0, ascending=True)
@@ -56,11 +53,8 @@ class LightResponse(Effect):
             return f'levels needs {c} x {s} x {k} values'
         return ''
 
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         """Nothing per sample: the effect acts where the world's table is made."""
-        return lambda level: level.copy()
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         out: Array = level.copy()
         return out
 

@@ -1,6 +1,5 @@
-"""``saturation_quantization``: the sensor's converter, one model of its value distribution:
-readings held at a floor or a ceiling, on a lattice coarser than the model's, or lost
-(a reading replaced by a dropout value).
+"""``saturation_quantization``: the sensor's converter: readings held at a floor or a
+ceiling, on a lattice coarser than the model's, or lost (replaced by a dropout value).
 
 The fit reads the converter's evidence (``Evidence.converter``: the limits the real
 readings pile up at, each sensor's lattice, the dropouts) and lets the simulator choose
@@ -9,25 +8,23 @@ among the combinations that evidence allows.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from itertools import product
+from typing import Any
 
 import numpy as np
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, param, rows
-from .fitting import STATIONARY, names
+from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
+from .fitting import STATIONARY, names, present
 
 
 @dataclass(frozen=True)
-class SaturationQuantization(Effect):
+class SaturationQuantization(
+        Effect, name='saturation_quantization', stage=Stage.READING, free=3,
+        summary='readings clipped at a floor or ceiling, on a coarser lattice, or dropping out'):
     """``sensors`` rounded to the lattice origin + k * ``step``, held in [low, high]; with
     probability ``dropout`` a reading is lost and reads ``dropout_value`` instead."""
 
-    name: ClassVar[str] = 'saturation_quantization'
-    stage: ClassVar[Stage] = Stage.READING
-    free: ClassVar[int] = 3
-    summary: ClassVar[str] = ('readings clipped at a floor or ceiling, on a coarser lattice, '
-                              'or dropping out')
     sensors: tuple[int, ...] = param((), 'sensors of the converter', 'sensors')
     low: float = param(0.0, 'floor: no reading lies below')
     high: float = param(DARK, 'ceiling: no reading lies above')
@@ -39,26 +36,14 @@ class SaturationQuantization(Effect):
     def inconsistency(self) -> str:
         return 'low must be below high' if self.low >= self.high else ''
 
-    def convert(self, x: Array, rng: np.random.Generator) -> Array:
-        lattice = np.round((x - self.origin) / self.step) * self.step + self.origin
-        out = np.clip(lattice, self.low, self.high)
-        if self.dropout > 0:
-            out = np.where(rng.random(out.shape) < self.dropout, self.dropout_value, out)
-        return out
-
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        located = rows(self.sensors, channels)
-
-        def step(level: Array) -> Array:
-            out: Array = level.copy()
-            out[located] = self.convert(level[located], rng)
-            return out
-        return step
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
         located = rows(self.sensors, level.shape[1])
+        lattice = np.round((level[:, located] - self.origin) / self.step) * self.step + self.origin
+        read = np.clip(lattice, self.low, self.high)
+        if self.dropout > 0:
+            read = np.where(rng.random(read.shape) < self.dropout, self.dropout_value, read)
         out: Array = level.copy()
-        out[:, located] = self.convert(level[:, located], rng)
+        out[:, located] = read
         return out
 
     @classmethod
@@ -67,8 +52,8 @@ class SaturationQuantization(Effect):
         low, high = (_strongest(found['limits'], end) for end in (0, 1))
         grid, lost, top = found['lattices'], found['dropouts'], found['top']
         if not (low or high or grid or lost):
-            return Candidate(cls.name, None, 'no readings held at a limit, no coarse value '
-                                             'grid and no dropouts')
+            return Candidate(cls.name, None,
+                             'no readings held at a limit, no coarse value grid and no dropouts')
         drop: dict[str, float] = {}
         if lost:
             values = [v for v, _ in lost.values()]
@@ -77,22 +62,18 @@ class SaturationQuantization(Effect):
         lattices = list(grid.values())
         step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
         options = []
-        for use_low in ([False, True] if low else [False]):
-            for use_high in ([False, True] if high else [False]):
-                # with dropouts, a grid is tried without its lattice too: only what is needed
-                for use_grid in ([False, True] if grid and lost else [bool(grid)]):
-                    sensors = (set(grid) if use_grid else set()) | set(lost) | \
-                        (set(low['sensors']) if use_low and low else set()) | \
-                        (set(high['sensors']) if use_high and high else set())
-                    low_value = low['value'] if use_low and low else 0.0
-                    high_value = high['value'] if use_high and high else top
-                    if sensors and low_value < high_value:
-                        options.append(cls(
-                            tuple(sorted(sensors)),
-                            low=low_value, high=high_value,
-                            step=float(step) if use_grid else 1.0,
-                            origin=float(origin) if use_grid else 0.0, **drop))
-        kinds = (STATIONARY,) if STATIONARY in evidence.kinds else None
+        # with dropouts, a grid is tried without its lattice too: only what is needed
+        for lo, hi, use_grid in product([None, low] if low else [None],
+                                        [None, high] if high else [None],
+                                        [False, True] if grid and lost else [bool(grid)]):
+            sensors = (set(grid) if use_grid else set()) | set(lost) | \
+                set(lo['sensors'] if lo else ()) | set(hi['sensors'] if hi else ())
+            low_value, high_value = lo['value'] if lo else 0.0, hi['value'] if hi else top
+            if sensors and low_value < high_value:
+                options.append(cls(tuple(sorted(sensors)), low_value, high_value,
+                                   float(step) if use_grid else 1.0,
+                                   origin=float(origin) if use_grid else 0.0, **drop))
+        kinds = present(evidence, (STATIONARY,))
         effect: Effect = min(options, key=lambda e: evidence.objective([e], kinds, limits=True))
         if lost:
             effect = evidence.rescaled_dropout(effect, sorted(lost))

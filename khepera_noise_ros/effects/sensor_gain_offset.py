@@ -8,24 +8,20 @@ factor) are fitted instead.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 from scipy import stats as sps
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
 from .fitting import ALPHA, holm, names
 
 
 @dataclass(frozen=True)
-class SensorGainOffset(Effect):
+class SensorGainOffset(Effect, name='sensor_gain_offset', stage=Stage.LIGHT, free=4,
+                       summary='per-sensor calibration differences in the light response'):
     """reading = anchor - gain * (anchor - ideal) + offset, per sensor."""
 
-    name: ClassVar[str] = 'sensor_gain_offset'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 4
-    summary: ClassVar[str] = 'per-sensor calibration differences in the light response'
     sensors: tuple[int, ...] = param((), 'sensors whose calibration differs', 'sensors')
     gains: tuple[float, ...] = param((), 'gain about the anchor, per sensor', 'floats',
                                      per_sensor=True)
@@ -33,24 +29,15 @@ class SensorGainOffset(Effect):
                                        per_sensor=True)
     anchor: float = param(DARK, 'reading the gain turns about (the dark end)')
 
-    def _arrays(self, channels: int) -> tuple[Array, Array]:
-        located = rows(self.sensors, channels)
-        g, o = np.ones((channels, 1)), np.zeros((channels, 1))
+    def act(self, level: Array, rng: np.random.Generator) -> Array:
+        located = rows(self.sensors, level.shape[1])
+        g, o = np.ones((level.shape[1], 1)), np.zeros((level.shape[1], 1))
         g[located, 0], o[located, 0] = self.gains, self.offsets
-        return g, o
-
-    def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        g, o = self._arrays(channels)
-        return lambda level: self.anchor - g * (self.anchor - level) + o
-
-    def over_time(self, level: Array, rng: np.random.Generator) -> Array:
-        columns(self.sensors, level.shape[1])
-        return self.start(level.shape[2], level.shape[1], rng)(level)
+        out: Array = self.anchor - g * (self.anchor - level) + o
+        return out
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
-        """Sensors whose levels differ from the light model (chi-square, Holm), each with
-        the line that maps simulated levels onto real ones."""
         levels = evidence.rows('level')
         if not levels or evidence.observed_base:
             return Candidate(cls.name, None, 'no levels from the light model to compare')

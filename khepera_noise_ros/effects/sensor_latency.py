@@ -7,7 +7,6 @@ and the delay chosen by the simulator among the located sets.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -16,13 +15,10 @@ from .fitting import CLOSED_LOOP, STATIONARY, Z_DETECT, names, present
 
 
 @dataclass(frozen=True)
-class SensorLatency(Effect):
+class SensorLatency(Effect, name='sensor_latency', stage=Stage.READING, free=1,
+                    summary='readings arrive late, by whole steps'):
     """The ``sensors`` report the reading of ``steps`` samples ago (the first repeats)."""
 
-    name: ClassVar[str] = 'sensor_latency'
-    stage: ClassVar[Stage] = Stage.READING
-    free: ClassVar[int] = 1
-    summary: ClassVar[str] = 'readings arrive late, by whole steps'
     sensors: tuple[int, ...] = param((), 'sensors whose readings arrive late', 'sensors')
     steps: int = param(1, 'samples each reading arrives late', low=0, high=1000)
 

@@ -1,18 +1,15 @@
-"""``sensor_response``: a sensor follows its light gradually and late.
+"""``sensor_response``: a sensor follows its light late (a fractional delay) and gradually
+(a first-order lag, its own rate towards bright and towards dark).
 
-A fractional delay (the light of ``delay`` samples ago, interpolated between two
-samples) then a first-order lag (a fraction ``rate`` of the way per sample, its own
-towards bright and towards dark); whole-step ``sensor_latency`` is the case of a whole
-delay and rate 1.  The fit: the step response after a change of heading (stationary
-``step_response``, ``turn_step_response`` of rests after a turn) by least squares on
-its analytic form.  A delay seen only in the closed loop is ``sensor_latency``'s: there
-the turn responses alone confound a lag with the turn made.
+The fit: the step response after a change of heading (stationary ``step_response``,
+``turn_step_response`` of rests after a turn) by least squares on its analytic form.  A
+whole delay with rate 1 is ``sensor_latency``'s case, and so is a delay seen only in the
+closed loop: there the turn responses alone confound a lag with the turn made.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -25,14 +22,11 @@ WHOLE = 0.05          # a delay this near a whole step with rate 1 is sensor_lat
 
 
 @dataclass(frozen=True)
-class SensorResponse(Effect):
+class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
+                     summary='sensors follow their light late and gradually (delay and lag)'):
     """Sensor s reads y[t] = y[t-1] + k (x[t - delay] - y[t-1]), k = ``rate_bright`` when
     the light brightens, ``rate_dark`` when it darkens, from a settled start."""
 
-    name: ClassVar[str] = 'sensor_response'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 3
-    summary: ClassVar[str] = 'sensors follow their light late and gradually (delay and lag)'
     sensors: tuple[int, ...] = param((), 'sensors that respond late or gradually', 'sensors')
     delay: float = param(0.0, 'delay, samples (fractions interpolate)', low=0.0, high=20.0)
     rate_bright: float = param(1.0, 'fraction of the way per sample towards bright',

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
@@ -26,14 +26,11 @@ EVALUATIONS = (16, 10)
 
 
 @dataclass(frozen=True)
-class TemporalDrift(Effect):
+class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
+                    summary='slow, autocorrelated change over time, per sensor or shared'):
     """AR(1) wander of the gain: sd ``sd`` (a fraction), correlation time ``time_constant``
     samples, one wander for all ``sensors`` if ``shared``."""
 
-    name: ClassVar[str] = 'temporal_drift'
-    stage: ClassVar[Stage] = Stage.LIGHT
-    free: ClassVar[int] = 3
-    summary: ClassVar[str] = 'slow, autocorrelated change over time, per sensor or shared'
     sensors: tuple[int, ...] = param((), 'sensors that wander', 'sensors')
     sd: float = param(0.01, 'sd of the wander, a fraction of the level', low=0.0)
     time_constant: float = param(30.0, 'correlation time, samples', above=0.0)
