@@ -1,13 +1,11 @@
-"""``actuator_response``: the executed turn for each commanded size and direction.
+"""``actuator_response``: the turn made for each commanded size and direction: a dead-band
+(static friction eats that many degrees of every turn), a gain beyond it, its own to each
+side, optionally a scale per commanded size, and scatter.
 
-A dead-band (static friction eats that many degrees of every turn), a gain beyond it,
-different to the right and to the left, optionally a scale per commanded size (a table
-over degrees), and scatter (a share of the turn made, and degrees per turn).  With
-``knocks`` the task's heading knocks go through the same wheels.  The fit: executed
-turns where they are measured (tracked headings, or the turn-calibration protocol) by
-least squares.  Without measured turns it is not fitted: the closed loop's statistics
-alone confound its form with the noise, and the turn error there is
-``actuator_turn_error``'s.  A response that is a plain scale defers to it too.
+The fit: measured turns (tracked headings, or the turn-calibration protocol) by weighted
+least squares.  Without them it is not fitted (the closed loop's statistics alone confound
+its form with the noise; the turn error there is ``actuator_turn_error``'s), nor where a
+plain scale fits as well.
 """
 from __future__ import annotations
 
@@ -38,8 +36,7 @@ class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, f
                              high=45.0)
     gain: float = param(1.0, 'turn made per commanded degree beyond the dead-band', low=0.0,
                         high=5.0)
-    asymmetry: float = param(0.0, 'right turns gain (1 + a), left (1 - a)', low=-0.9,
-                             high=0.9)
+    asymmetry: float = param(0.0, 'right turns gain (1 + a), left (1 - a)', low=-0.9, high=0.9)
     sizes: tuple[float, ...] = param((), 'commanded sizes of the scale table, degrees',
                                      'floats', above=0.0, ascending=True)
     scales: tuple[float, ...] = param((), 'scale at each size (constant beyond)', 'floats',
@@ -54,12 +51,9 @@ class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, f
     def mean(self, deg: Array) -> Array:
         """The turn made of commanded turns ``deg`` without scatter."""
         size = np.abs(deg)
-        out = np.sign(deg) * self.gain * (1 + np.sign(deg) * self.asymmetry) * \
+        out: Array = np.sign(deg) * self.gain * (1 + np.sign(deg) * self.asymmetry) * \
             np.maximum(size - self.dead_band, 0.0)
-        if self.sizes:
-            out = out * np.interp(size, self.sizes, self.scales)
-        result: Array = out
-        return result
+        return out * np.interp(size, self.sizes, self.scales) if self.sizes else out
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
         """Commanded turns (samples, 1, robots) in degrees, made."""
@@ -73,44 +67,38 @@ class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, f
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
         if CLOSED_LOOP not in evidence.kinds:
-            return Candidate(cls.name, None, 'no closed-loop or turn-calibration recording: '
-                                             'record --protocol turns to measure the turns')
+            return cls.nothing('no closed-loop or turn-calibration recording: record '
+                               '--protocol turns to measure the turns')
         turns = evidence.turns()
         turns = turns[np.isfinite(turns).all(axis=1) & (turns[:, 0] != 0)]
         if len(turns) < MIN_TURNS:
-            return Candidate(cls.name, None, f'{len(turns)} turns measured (needs {MIN_TURNS}): '
-                                             'record --protocol turns, or a robot that reports '
-                                             'its heading; the closed loop\'s turn error is '
-                                             'actuator_turn_error\'s')
+            return cls.nothing(f'{len(turns)} turns measured (needs {MIN_TURNS}): record '
+                               '--protocol turns, or a robot that reports its heading; the '
+                               'closed loop\'s turn error is actuator_turn_error\'s')
         effect, plain = _direct(turns)
         how = f'{len(turns)} turns measured'
         if plain:
-            return Candidate(cls.name, None, f'{how}: a plain scale of the turn '
-                                             f'(actuator_turn_error\'s case)')
+            return cls.nothing(f'{how}: a plain scale of the turn (actuator_turn_error\'s case)')
         table = f', scale by size {dict(zip(effect.sizes, effect.scales))}' if effect.sizes \
             else ''
         return Candidate(cls.name, effect, f'{how}: dead-band {effect.dead_band:g} deg, gain '
-                                           f'{effect.gain:g}, asymmetry {effect.asymmetry:g}'
-                                           f'{table}, scatter {effect.scatter:g}, jitter '
-                                           f'{effect.jitter:g} deg')
+                         f'{effect.gain:g}, asymmetry {effect.asymmetry:g}{table}, scatter '
+                         f'{effect.scatter:g}, jitter {effect.jitter:g} deg')
 
 
-def _sides(c: Array, e: Array, w: Array, band: float) -> tuple[float, float, float]:
-    """(right gain, left gain, weighted residual sum of squares) beyond ``band``."""
-    out, rss = [], 0.0
-    for side in (1.0, -1.0):
-        at = np.sign(c) == side
-        x = side * np.maximum(np.abs(c[at]) - band, 0.0)
-        g = float((w[at] * x) @ e[at] / ((w[at] * x) @ x)) if x @ x > 0 else 1.0
-        out.append(g)
-        rss += float((w[at] * (e[at] - g * x) ** 2).sum())
-    return out[0], out[1], rss
+def _gain(x: Array, y: Array, w: Array) -> tuple[float, float]:
+    """The weighted least-squares scale of ``x`` to ``y`` (1 for no ``x``) and its RSS."""
+    g = float((w * x) @ y / ((w * x) @ x)) if x @ x > 0 else 1.0
+    return g, float((w * (y - g * x) ** 2).sum())
 
 
 def _form(c: Array, e: Array, w: Array) -> tuple[ActuatorResponse, float]:
     """The dead-band and the two sides' gains by weighted least squares, and the RSS."""
-    (right, left, rss), band = min(((_sides(c, e, w, b), b) for b in BANDS),
-                                   key=lambda f: f[0][2])
+    def sides(band: float) -> tuple[float, float, float]:
+        fits = [_gain(side * np.maximum(np.abs(c[at]) - band, 0.0), e[at], w[at])
+                for side, at in ((1.0, c > 0), (-1.0, c < 0))]
+        return fits[0][0], fits[1][0], fits[0][1] + fits[1][1]
+    (right, left, rss), band = min(((sides(b), b) for b in BANDS), key=lambda f: f[0][2])
     asym = float(np.clip((right - left) / (right + left), -0.9, 0.9)) if right + left > 0 \
         else 0.0
     return ActuatorResponse(float(band), round((right + left) / 2, 4), round(asym, 4)), rss
@@ -126,8 +114,7 @@ def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
     scatter, jitter = _scatter(effect.mean(c), e - effect.mean(c))
     w = 1.0 / (scatter ** 2 * effect.mean(c) ** 2 + jitter ** 2 + 0.01)
     effect, rss = _form(c, e, w)
-    scale = float((w * c) @ e / ((w * c) @ c))
-    rss0 = float((w * (e - scale * c) ** 2).sum())
+    rss0 = _gain(c, e, w)[1]
     made = effect.mean(c)
     sizes = np.unique(np.abs(c))
     ratio, p_size = [], 1.0
@@ -135,23 +122,20 @@ def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
         rss_table = 0.0
         for size in sizes:
             g = np.abs(c) == size
-            m = made[g]
-            r = float((w[g] * m) @ e[g] / ((w[g] * m) @ m)) if m @ m > 0 else 1.0
+            r, rss_size = _gain(made[g], e[g], w[g])
             ratio.append(round(float(np.clip(r, 0.0, 5.0)), 4))
-            rss_table += float((w[g] * (e[g] - r * m) ** 2).sum())
+            rss_table += rss_size
         dof = n - 3 - sizes.size
         if dof > 0 and rss - rss_table > TINY * n:
             f = ((rss - rss_table) / sizes.size) / max(rss_table / dof, TINY)
-            p_size = float(sps.f.sf(f,
-                                    sizes.size, dof))
+            p_size = float(sps.f.sf(f, sizes.size, dof))
     dof = max(n - 3, 1)
     p_form = float(sps.f.sf(((rss0 - rss) / 2) / max(rss / dof, TINY), 2, dof)) \
         if rss0 - rss > TINY * n else 1.0
     table = (tuple(float(x) for x in sizes), tuple(ratio)) if p_size < ALPHA else ((), ())
     made = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table).mean(c)
-    scatter, jitter = _scatter(made, e - made)
     effect = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table,
-                              scatter, jitter)
+                              *_scatter(made, e - made))
     return effect, p_form >= ALPHA and p_size >= ALPHA
 
 

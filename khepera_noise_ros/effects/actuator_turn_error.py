@@ -1,11 +1,10 @@
 """``actuator_turn_error``: a commanded turn rotates the robot by a different amount.
 
 The fit: the readings' response to a turn scaled (``turn_response``,
-``sensor_turn_response``), the turn itself where headings are recorded
-(``turn_size``), and, for a zero-mean random error, which leaves those alone, the
-scatter of the turn by band of power (``turn_scatter``, ``turn_size_scatter``).
-Scale, slip and creep (fitted only where power 0 shows scatter) are fitted jointly by
-golden-section search, one after the other; a plain value is kept where it fits as well.
+``sensor_turn_response``), the turn itself where headings are recorded (``turn_size``),
+and for a random error, which leaves those alone, the scatter of the turn by band of
+power (``turn_scatter``, ``turn_size_scatter``).  Scale, slip and creep (only where power
+0 scatters) by golden-section search in turn; a plain value is kept where it fits as well.
 """
 from __future__ import annotations
 
@@ -50,12 +49,12 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
     def fit(cls, evidence: Evidence) -> Candidate:
         response = [r for r in evidence.rows('turn_response') if r.key.part == 'lag 0']
         if not response:
-            return Candidate(cls.name, None, 'no closed-loop data: turns cannot be checked')
+            return cls.nothing('no closed-loop data: turns cannot be checked')
         # a random error only adds scatter: less than simulated is no fingerprint of it
         flagged = {f: [r.key for r in evidence.rows(f)
                        if (r.z if f in SCATTER else abs(r.z)) > Z_DETECT] for f in FAMILIES}
         if not any(flagged.values()):
-            return Candidate(cls.name, None, 'the readings respond to turns as simulated')
+            return cls.nothing('the readings respond to turns as simulated')
         # recorded headings measure the turn itself; else the readings' response to it, at
         # both lags (least squares): with a latency given, the lag-0 response is noise alone
         size = [(r.real, r.sim) for r in evidence.rows('turn_size')]
@@ -78,10 +77,10 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
         # the creep first where power 0 shows it (there the slip cannot act), then the
         # slip given it, the scale once more, and the creep given both
         scale = golden(lambda x: objective(x, 0.0), scale0 * 0.7, scale0 * 1.45, 8)
-        creep = _creep(lambda x: objective(scale, 0.0, x)) if creeps else 0.0
+        creep = golden(lambda x: objective(scale, 0.0, x), 0.0, CREEP_MAX, 7) if creeps else 0.0
         slip = golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
         scale = golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
-        creep = _creep(lambda x: objective(scale, slip, x)) if creeps else 0.0
+        creep = golden(lambda x: objective(scale, slip, x), 0.0, CREEP_MAX, 7) if creeps else 0.0
         scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4),
                                        round(creep, 3))
         effect = cls(scale, slip, creep=creep)
@@ -91,10 +90,6 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
             note += f'; turns scatter more than simulated ({", ".join(scatter)})'
         return Candidate(cls.name, effect, f'{note}: scale {effect.scale:g}, slip '
                                            f'{effect.slip:g}, creep {effect.creep:g} deg')
-
-
-def _creep(f: Callable[[float], float]) -> float:
-    return golden(f, 0.0, CREEP_MAX, 7)
 
 
 def _simplest(objective: Callable[..., float], scale: float, slip: float,

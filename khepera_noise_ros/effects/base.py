@@ -168,6 +168,11 @@ class Effect:
         """Locate and fit this effect on the evidence of real recordings."""
         raise NotImplementedError
 
+    @classmethod
+    def nothing(cls, why: str) -> Candidate:
+        """The fitter's answer when it finds nothing to fit."""
+        return Candidate(cls.name, None, why)
+
     def parameters(self) -> dict[str, Any]:
         """The fields as plain values, without the location."""
         return {k: v for k, v in self.to_dict().items() if k not in ('name', 'sensors', 'groups')}

@@ -2,9 +2,7 @@
 groups, found from the data).
 
 The groups: sensors merged by average linkage of the evidence that their fast noise is
-shared beyond the simulator's (a z per pair, ``Evidence.group_evidence``) while the link
-exceeds a z of 4 and chance: the Bonferroni threshold over the pairs, widened by the
-spread of the same evidence between the simulator and itself (``Evidence.group_null``).
+shared beyond the simulator's (a z per pair) while the link exceeds a z of 4 and chance.
 The strength: from the excess covariance within the groups, refined by the simulator; a
 shared noise of a fixed size in readings (a supply, a converter) is tried as well.
 """
@@ -62,12 +60,10 @@ class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1
         found = [tuple(channels[i] for i in g)
                  for g in groups_of(evidence, evidence.group_evidence('fast'))]
         if not found:
-            return Candidate(cls.name, None,
-                             'no sensors whose noise is more correlated than simulated')
+            return cls.nothing('no sensors whose noise is more correlated than simulated')
         start = _shared_strength(evidence, found)
-        first = start
-        if not evidence.rows('correlation'):   # closed loop only: the spreads give the start
-            first = _loop_strength(evidence, found) or start
+        # closed loop only: the spreads give the start
+        first = start if evidence.rows('correlation') else _loop_strength(evidence, found) or start
         groups = tuple(found)
         effect = refine(evidence, lambda s: cls(groups, s), first)
         # shared noise of a fixed size in readings, one more form of the same effect
@@ -79,17 +75,16 @@ class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1
         return Candidate(cls.name, effect, f'excess correlation clusters into {text}')
 
 
-def groups_of(evidence: Evidence, z: Array, part: str = 'fast') -> list[list[int]]:
+def groups_of(evidence: Evidence, z: Array) -> list[list[int]]:
     """Groups (positions in ``evidence.channels``) of the pair evidence ``z``, merged while
-    the link exceeds ``THRESHOLD`` and what chance gives: the Bonferroni threshold over the
-    pairs at ``ALPHA``, scaled by how much wider than N(0, 1) the same evidence is between
-    the simulator and itself (``Evidence.group_null``), so that a chance pair is not put
-    in where the evidence is wide (a threshold below ``THRESHOLD`` let the emulated
-    robot's flicker merge every sensor and its drift go unseen)."""
+    the link exceeds ``THRESHOLD`` and chance: the Bonferroni threshold over the pairs at
+    ``ALPHA``, widened by how much wider than N(0, 1) the same evidence is between the
+    simulator and itself (a lower threshold let the emulated robot's flicker merge every
+    sensor and its drift go unseen)."""
     c = z.shape[0]
     if c < 2 or not (z > THRESHOLD).any():       # no link could count: the null is not needed
         return []
-    null = evidence.group_null(part)
+    null = evidence.group_null('fast')
     off = ~np.eye(c, dtype=bool)
     spread = float(np.sqrt(np.mean(null[:, off] ** 2))) if null.size else 1.0
     return cluster(z, max(THRESHOLD,
@@ -123,10 +118,8 @@ def _shared_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float
     for r in evidence.rows('correlation'):
         for g in groups:
             if set(r.key.sensors) <= set(g):
-                a, b = r.key.sensors
-                sr = [spread[r.key.condition][x][0] for x in (a, b)]
-                ss = [spread[r.key.condition][x][1] for x in (a, b)]
-                num += r.real * sr[0] * sr[1] - r.sim * ss[0] * ss[1]
+                (ra, sa), (rb, sb) = (spread[r.key.condition][x] for x in r.key.sensors)
+                num += r.real * ra * rb - r.sim * sa * sb
                 den += float(np.mean([level[r.key.condition][x][1] for x in g])) ** 2
     return float(np.sqrt(max(num, 0.0) / den)) if den > 0 and num > 0 else 0.01
 

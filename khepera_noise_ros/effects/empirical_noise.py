@@ -1,18 +1,18 @@
 """``empirical_noise``: the remainder no named effect explains, as measured.
 
-Not a name of the vocabulary: the diagnosis fits it to whatever the chosen effects
-leave, assuming nothing of its shape, and scores it on held-out data like a named
-effect.  Fast part (first differences of the run residuals / sqrt 2): per sensor the
-extra variance over the simulator's at each light level, binned at level quantiles, as
-an sd curve; across sensors the extra covariance as a correlation (made positive
-semi-definite and factored).  Slow part (means of consecutive windows of the
-residuals): per sensor the extra variance as a fraction of the squared level, its
-correlation time from the windows' lag-one autocorrelation, and its correlation.
+Not in the vocabulary: the diagnosis fits it to whatever the chosen effects leave,
+assuming nothing of its shape, and scores it on held-out data like a named effect.  Fast
+part (first differences of the run residuals / sqrt 2): per sensor the extra sd at each
+light level (bins at level quantiles); across sensors the extra correlation (made positive
+semi-definite).  Slow part (means of windows of the residuals): per sensor the extra
+variance over the squared level, its correlation time (the windows' lag-one
+autocorrelation) and its correlation.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -59,8 +59,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
 
     def _fast(self, level: Array, z: Array, spread: Array, mix: Array) -> Array:
         """Fast noise of (sensors, ...) levels from (sensors, ...) normal draws."""
-        sd = np.stack([np.interp(level[k], self.levels, spread[k])
-                       for k in range(len(self.sensors))])
+        sd = np.stack([np.interp(level[k], self.levels, spread[k]) for k in range(len(spread))])
         out: Array = sd * np.einsum('ij,j...->i...', mix, z)
         return out
 
@@ -96,10 +95,10 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
-        real = [y for y in evidence.stationary_runs(False) if y.shape[0] >= 2 * WINDOW]
-        sim = [y for y in evidence.stationary_runs(True) if y.shape[0] >= 2 * WINDOW]
+        real, sim = ([y for y in evidence.stationary_runs(simulated) if y.shape[0] >= 2 * WINDOW]
+                     for simulated in (False, True))
         if not real or not sim:
-            return Candidate(cls.name, None, 'no stationary runs to measure')
+            return cls.nothing('no stationary runs to measure')
         sensors = tuple(int(s) for s in evidence.channels)
         n = len(sensors)
         levels = np.concatenate([y.mean(axis=0) for y in real])
@@ -110,8 +109,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         mr, ms = _moments(real, edges, n), _moments(sim, edges, n)
         spread = np.sqrt(np.clip(np.nan_to_num(mr['var'] - ms['var'], nan=0.0), 0.0, None)).T
         centres = [(lo + hi) / 2 for lo, hi in zip(edges[:-1], edges[1:])]
-        fast_cov = mr['cov'] - ms['cov']
-        mixing = _factor(fast_cov) if np.all(np.diag(fast_cov) > 0) else np.eye(n)
+        mixing = _factor(mr['cov'] - ms['cov'])
         slow_extra = np.clip(np.diag(mr['slow'] - ms['slow']), 0.0, None)
         slow_sd = np.sqrt(slow_extra / np.clip(mr['level2'], 1.0, None))
         with np.errstate(invalid='ignore', divide='ignore'):
@@ -119,16 +117,15 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
             rho = np.nanmedian(np.clip(ratio, 0.01, 0.99)) if np.isfinite(ratio).any() \
                 else np.nan
         tau = -WINDOW / math.log(rho) if np.isfinite(rho) else 30.0
-        slow_cov = mr['slow'] - ms['slow']
-        slow_mix = _factor(slow_cov) if np.all(np.diag(slow_cov) > 0) else np.eye(n)
+        slow_mix = _factor(mr['slow'] - ms['slow'])
         if not (spread.any() or slow_sd.any()):
-            return Candidate(cls.name, None, 'nothing left to measure')
-        effect = cls(sensors, tuple(round(float(c), 2) for c in centres),
-                     tuple(round(float(v), 4) for v in spread.ravel()),
-                     tuple(round(float(v), 5) for v in mixing.ravel()),
-                     tuple(round(float(v), 6) for v in slow_sd),
-                     round(float(np.clip(tau, 1.0, 1e4)), 2),
-                     tuple(round(float(v), 5) for v in slow_mix.ravel()))
+            return cls.nothing('nothing left to measure')
+
+        def rounded(values: Any, digits: int) -> tuple[float, ...]:
+            return tuple(round(float(v), digits) for v in np.ravel(values))
+        effect = cls(sensors, rounded(centres, 2), rounded(spread, 4), rounded(mixing, 5),
+                     rounded(slow_sd, 6), round(float(np.clip(tau, 1.0, 1e4)), 2),
+                     rounded(slow_mix, 5))
         return Candidate(cls.name, effect, 'the remainder as measured')
 
 
@@ -161,7 +158,10 @@ def _moments(runs: list[Array], edges: Array, channels: int) -> dict[str, Array]
 
 
 def _factor(cov: Array) -> Array:
-    """Lower Cholesky factor of the correlation of a covariance, clipped to PSD."""
+    """Lower Cholesky factor of the correlation of a covariance, clipped to PSD (the
+    identity unless every variance is positive)."""
+    if not np.all(np.diag(cov) > 0):
+        return np.eye(len(cov))
     sd = np.sqrt(np.clip(np.diag(cov), 1e-12, None))
     corr = cov / sd[:, None] / sd[None, :]
     w, v = np.linalg.eigh((corr + corr.T) / 2)

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence, TypeVar
+from typing import Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
@@ -55,6 +55,19 @@ def holm(p: np.ndarray) -> np.ndarray:
     out = np.empty(n)
     out[order] = adjusted
     return out
+
+
+def by_sensor(rows: list[Row]) -> dict[int, list[Row]]:
+    """A family's rows by their (first) sensor, in sensor order, each in its own order."""
+    out: dict[int, list[Row]] = {}
+    for r in sorted(rows, key=lambda r: r.key.sensors[0]):
+        out.setdefault(r.key.sensors[0], []).append(r)
+    return out
+
+
+def significant(sensors: Iterable[int], p: Sequence[float]) -> list[int]:
+    """The sensors whose p-values, Holm-adjusted, lie below ``ALPHA``."""
+    return [s for s, q in zip(sensors, holm(np.asarray(p, np.float64))) if q < ALPHA]
 
 
 def by_condition(rows: list[Row]) -> dict[str | None, dict[int, tuple[float, float]]]:

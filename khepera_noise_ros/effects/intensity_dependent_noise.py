@@ -1,11 +1,11 @@
-"""``intensity_dependent_noise``: noise whose size follows a law of the light level.
+"""``intensity_dependent_noise``: noise whose size follows a law of the light level,
+sd(r) = constant + strength * u * (u / scale) ** exponent with u = r ('dark': the noise
+grows with darkness, the Khepera's 525 end, as a room's flicker) or u = scale - r.
 
-A spread law is  sd(r) = constant + strength * u * (u / scale) ** exponent  with u = r
-('dark': the noise grows with darkness, the Khepera's 525 end, as a room's flicker) or
-u = scale - r ('bright').  The fit: on the sensors whose fast noise is shared beyond the
-simulator's (one shared draw), else on those with extra spread (a draw each), the laws
-that fit the cells' excess variance best (non-negative least squares on the sd, every
-direction and exponent of a grid), then judged by the simulator.
+The fit: on the sensors whose fast noise is shared beyond the simulator's (one shared
+draw), else on those with extra spread (a draw each), the laws that fit the cells'
+excess variance best (non-negative least squares on the sd over a grid of directions
+and exponents), then judged by the simulator.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, columns, held, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, columns, held, param
 from .correlated_noise import groups_of
 from .fitting import Z_DETECT, names, refine
 
@@ -48,7 +48,7 @@ class IntensityDependentNoise(
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
-        width = 1 if self.shared else len(rows(self.sensors, level.shape[1]))
+        width = 1 if self.shared else len(self.sensors)
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))
         out: Array = level.copy()
         out[:, cols] += z * held(self.amplitude, level[:, cols])
@@ -67,7 +67,7 @@ class IntensityDependentNoise(
                                     if r.z > Z_DETECT}))
             shared = False
         if not sensors:
-            return Candidate(cls.name, None, 'no extra spread or shared noise to explain')
+            return cls.nothing('no extra spread or shared noise to explain')
         options = [cls(sensors, round(k, 6), e, DARK, round(c0, 4), d, shared)
                    for d, e, c0, k, _ in laws(evidence.spread_cells(sensors))]
         options = [o for o in options if o.strength > 0 or o.constant > 0]
@@ -76,20 +76,21 @@ class IntensityDependentNoise(
         options += [dataclasses.replace(o, constant=0.0) for o in options
                     if o.constant > 0 and o.strength > 0]
         if not options:
-            return Candidate(cls.name, None, 'extra spread fits no spread law')
+            return cls.nothing('extra spread fits no spread law')
         effect = min(options, key=lambda e: evidence.objective([e]))
         if effect.strength > 0:
             chosen = effect
             effect = refine(evidence, lambda s: dataclasses.replace(chosen, strength=s),
                             effect.strength, evaluations=5)
         assert isinstance(effect, cls)
+        u, grows = ('r', 'darkness') if effect.direction == 'dark' else ('(525 - r)', 'brightness')
         kind = 'one shared draw' if shared else 'a draw per sensor'
-        return Candidate(cls.name, effect, f'extra spread on {names(sensors)}: '
-                                           f'{describe(effect)}, {kind}')
+        return Candidate(cls.name, effect, f'extra spread on {names(sensors)}: sd = '
+                         f'{effect.constant:.3g} + {effect.strength:.3g} * {u} * ({u} / 525)^'
+                         f'{effect.exponent:g} (grows with {grows}), {kind}')
 
 
-def shape(level: Array | float, direction: str, exponent: float,
-          scale: float = DARK) -> Array:
+def shape(level: Array | float, direction: str, exponent: float, scale: float = DARK) -> Array:
     """u * (u / scale) ** exponent, u the distance from the quiet end; 0 where u is 0."""
     r = np.clip(np.asarray(level, np.float64), 0.0, scale)
     u = r if direction == 'dark' else scale - r
@@ -99,9 +100,8 @@ def shape(level: Array | float, direction: str, exponent: float,
     return law
 
 
-def laws(cells: Sequence[tuple[float, float]], top: int = 3,
-         scale: float = DARK) -> list[tuple[str, float, float, float, float]]:
-    """The ``top`` laws (direction, exponent, constant, strength, residual) that fit the
+def laws(cells: Sequence[tuple[float, float]]) -> list[tuple[str, float, float, float, float]]:
+    """The three laws (direction, exponent, constant, strength, residual) that fit the
     cells [(level, excess variance)] best."""
     if not cells:
         return []
@@ -110,7 +110,7 @@ def laws(cells: Sequence[tuple[float, float]], top: int = 3,
     out = []
     for direction in DIRECTIONS:
         for exponent in EXPONENTS:
-            x = np.stack([np.ones_like(level), shape(level, direction, exponent, scale)], axis=1)
+            x = np.stack([np.ones_like(level), shape(level, direction, exponent)], axis=1)
             if not np.isfinite(x).all() or x[:, 1].max() <= 0:
                 continue
             norm = x.max(axis=0)
@@ -118,10 +118,4 @@ def laws(cells: Sequence[tuple[float, float]], top: int = 3,
             coef = coef / norm
             out.append((direction, exponent, float(coef[0]), float(coef[1]), float(residual)))
     out.sort(key=lambda t: t[4])
-    return out[:top]
-
-
-def describe(e: IntensityDependentNoise) -> str:
-    u = 'r' if e.direction == 'dark' else '(525 - r)'
-    return (f'sd = {e.constant:.3g} + {e.strength:.3g} * {u} * ({u} / 525)^{e.exponent:g} '
-            f'(grows with {"darkness" if e.direction == "dark" else "brightness"})')
+    return out[:3]

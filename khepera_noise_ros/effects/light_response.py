@@ -1,12 +1,11 @@
 """``light_response``: each sensor's light over bearing is the robot's, not the model's.
 
-A table per lighting condition (as Webots' ``lookupTable``): the robot's level at each
-knot bearing, interpolated round the circle (Akima's local cubic from four knots on,
-linear below), replacing the world's response of the sensors it names; or, where the
-bearings were too few for a shape (``between='model'``), the world's response plus the
-difference interpolated linearly.  The fit: the real levels at the recorded headings
-(``level``), on the sensors whose levels no line through the model's explains, where a
-sweep gives bearings enough for a shape (else a shape would be a guess).
+A table per lighting condition (as Webots' ``lookupTable``): the robot's level at knot
+bearings, interpolated round the circle (Akima's local cubic from four knots on, linear
+below), replaces the world's response of the sensors it names (``between='model'``: the
+world's response plus the difference interpolated linearly).  The fit: the real levels at
+the recorded headings, on the sensors whose levels no line through the model's explains,
+where a sweep gives bearings enough for a shape (else a shape would be a guess).
 """
 from __future__ import annotations
 
@@ -19,7 +18,7 @@ from scipy.interpolate import Akima1DInterpolator
 
 from ..core.khepera import DARK, TENTHS
 from .base import Array, Candidate, Effect, Evidence, Row, Stage, param, rows
-from .fitting import ALPHA, holm, names
+from .fitting import by_sensor, names, significant
 
 SPARSE = 12           # fewer bearings than this round the circle leave the shape a guess
 
@@ -58,18 +57,13 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
         out: Array = level.copy()
         return out
 
-    def condition(self, world: Any) -> int | None:
-        """The index of ``world``'s condition, None if not listed."""
-        for c, (lamp, ambient) in enumerate(zip(self.lamps, self.ambients)):
-            if np.isclose(lamp, world.lamp_distance_mm) and np.isclose(ambient, world.ambient):
-                return c
-        return None
-
     def table(self, table: Array, world: Any) -> Array:
-        c = self.condition(world)
         out: Array = np.array(table, np.float64)
-        if c is None:
+        listed = [c for c, (lamp, ambient) in enumerate(zip(self.lamps, self.ambients)) if
+                  np.isclose(lamp, world.lamp_distance_mm) and np.isclose(ambient, world.ambient)]
+        if not listed:
             return out
+        c = listed[0]
         grid = np.arange(table.shape[1]) * (360.0 / table.shape[1])
         levels = np.reshape(self.levels, (len(self.lamps), len(self.sensors), -1))[c]
         knots = np.asarray(self.bearings)
@@ -87,19 +81,16 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
     def fit(cls, evidence: Evidence) -> Candidate:
         levels = evidence.rows('level')
         if not levels or evidence.observed_base:
-            return Candidate(cls.name, None, 'no levels from the light model to compare')
+            return cls.nothing('no levels from the light model to compare')
         # the levels as read (a shape no line explains also moves the runs' shared factors,
         # so they are not divided out as a change over time)
         located = _misshapen(levels, evidence.rows('spread'))
         if not located:
-            return Candidate(cls.name, None, 'every sensor\'s levels follow the light model '
-                                             'up to a calibration and its noise')
+            return cls.nothing('every sensor\'s levels follow the light model up to a '
+                               'calibration and its noise')
         worlds = evidence.worlds()
-        cells: dict[tuple[str, float, int], Row] = {}
-        for r in levels:
-            b = _bearing(r)
-            if r.key.condition in worlds and b is not None:
-                cells[(str(r.key.condition), b, r.key.sensors[0])] = r
+        cells = {(str(r.key.condition), b, r.key.sensors[0]): r for r in levels
+                 if (b := _bearing(r)) is not None and r.key.condition in worlds}
         conditions = sorted({c for c, _, _ in cells})
         bearings = np.array(sorted({b for _, b, _ in cells}))
         seen = {c: sorted({b for cc, b, _ in cells if cc == c}) for c in conditions}
@@ -110,10 +101,9 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
                   and np.ptp(stock[c][located], axis=1).max() > 1.0]
         if sparse:          # a shape is not guessed: the levels are a calibration's to fit
             text = '; '.join(f'{c}: {len(seen[c])}' for c in sparse)
-            return Candidate(cls.name, None, f'levels of {names(located)} differ in shape from '
-                                             f'the light model, but the bearings are too few '
-                                             f'for a shape (needs {SPARSE}; {text}): record '
-                                             f'--protocol sweep')
+            return cls.nothing(f'levels of {names(located)} differ in shape from the light '
+                               f'model, but the bearings are too few for a shape (needs '
+                               f'{SPARSE}; {text}): record --protocol sweep')
         values: list[float] = []
         for cond in conditions:
             for s in located:       # the model's light corrected by what the robot read
@@ -128,7 +118,7 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
                      tuple(float(worlds[c].ambient) for c in conditions), tuple(values))
         text = '; '.join(f'{c}: ' + ', '.join(f'{b:g}' for b in seen[c]) for c in conditions)
         return Candidate(cls.name, effect, f'levels of {names(located)} differ in shape from '
-                                           f'the light model; bearings seen (deg) {text}')
+                         f'the light model; bearings seen (deg) {text}')
 
 
 def around(x: Array, knots: Array, values: Array) -> Array:
@@ -138,9 +128,7 @@ def around(x: Array, knots: Array, values: Array) -> Array:
     if k.size < 4:
         out: Array = np.interp(np.mod(x, 360.0), k, v, period=360.0)
         return out
-    wrap = min(3, k.size)
-    kk = np.r_[k[-wrap:] - 360.0, k, k[:wrap] + 360.0]
-    curve = Akima1DInterpolator(kk, np.r_[v[-wrap:], v, v[:wrap]])
+    curve = Akima1DInterpolator(np.r_[k[-3:] - 360.0, k, k[:3] + 360.0], np.r_[v[-3:], v, v[:3]])
     result: Array = np.asarray(curve(np.mod(x, 360.0)), np.float64)
     return result
 
@@ -156,22 +144,19 @@ def _bearing(r: Row) -> float | None:
 def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
     """Sensors whose levels stay off after the best line through the model's levels (a
     gain and offset): chi-square of the line's residuals, Holm, and by more than the
-    sensor's own noise (the median spread of its cells; a misfit below it a controller
-    cannot tell from noise, and noise clipped at a limit moves a mean that much).  A
-    level's error is at least its cell's spread times the median ratio of the two over
-    the cells (short runs let the bootstrap understate some cells' errors)."""
-    spread = {r.key: r.real for r in spreads}
-    ratio = [r.se / spread[k] for r in levels
-             if (k := r.key._replace(family='spread')) in spread and spread[k] > 0]
+    sensor's own noise (the median spread of its cells: a controller cannot tell a smaller
+    misfit from noise, and noise clipped at a limit moves a mean that much).  A level's
+    error is at least its cell's spread times the median ratio of the two (short runs let
+    the bootstrap understate some cells' errors)."""
+    by_key = {r.key: r.real for r in spreads}
+    spread = {r.key: by_key.get(r.key._replace(family='spread'), 0.0) for r in levels}
+    ratio = [r.se / spread[r.key] for r in levels if spread[r.key] > 0]
     typical = float(np.median(ratio)) if ratio else 0.0
-    p, sensors, small = [], sorted({r.key.sensors[0] for r in levels}), set()
-    for s in sensors:
-        mine = [r for r in levels if r.key.sensors[0] == s]
-        noise = float(np.median([spread.get(r.key._replace(family='spread'), 0.0)
-                                 for r in mine]))
+    cells, p, small = by_sensor(levels), [], set()
+    for s, mine in cells.items():
+        noise = float(np.median([spread[r.key] for r in mine]))
         real, sim, se = (np.array(v, np.float64) for v in zip(*[(
-            r.real, r.sim, max(r.se, 0.3, typical * spread.get(
-                r.key._replace(family='spread'), 0.0))) for r in mine]))
+            r.real, r.sim, max(r.se, 0.3, typical * spread[r.key])) for r in mine]))
         if real.size < 3:
             p.append(1.0)
             continue
@@ -184,5 +169,4 @@ def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
         p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof)))
         if float(np.sqrt(np.mean((real - line) ** 2))) < noise:
             small.add(s)
-    adjusted = holm(np.array(p)) if p else np.array([])
-    return [s for s, q in zip(sensors, adjusted) if q < ALPHA and s not in small]
+    return [s for s in significant(cells, p) if s not in small]

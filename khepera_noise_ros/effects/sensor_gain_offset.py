@@ -14,7 +14,7 @@ from scipy import stats as sps
 
 from ..core.khepera import DARK
 from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
-from .fitting import ALPHA, holm, names
+from .fitting import by_sensor, names, significant
 
 
 @dataclass(frozen=True)
@@ -40,23 +40,20 @@ class SensorGainOffset(Effect, name='sensor_gain_offset', stage=Stage.LIGHT, fre
     def fit(cls, evidence: Evidence) -> Candidate:
         levels = evidence.rows('level')
         if not levels or evidence.observed_base:
-            return Candidate(cls.name, None, 'no levels from the light model to compare')
+            return cls.nothing('no levels from the light model to compare')
         change = evidence.shared_change()
         moved = bool(change and change['significant'])
         if moved and change:          # what a shared change over time leaves is the calibration
             levels = evidence.steady_rows(levels, change)
-        sensors = sorted({r.key.sensors[0] for r in levels})
-        chi = {s: sum(r.z * r.z for r in levels if r.key.sensors[0] == s) for s in sensors}
-        dof = {s: sum(1 for r in levels if r.key.sensors[0] == s) for s in sensors}
-        p = holm(np.array([sps.chi2.sf(chi[s], dof[s]) for s in sensors]))
-        located = [s for s, q in zip(sensors, p) if q < ALPHA]
+        cells = by_sensor(levels)
+        located = significant(cells, [sps.chi2.sf(sum(r.z * r.z for r in v), len(v))
+                                      for v in cells.values()])
         if not located:
-            return Candidate(cls.name, None, 'no sensor\'s levels differ significantly' + (
+            return cls.nothing('no sensor\'s levels differ significantly' + (
                 ' beyond a shared change over time' if moved else ''))
         gains, offsets = [], []
         for s in located:
-            real = np.array([r.real for r in levels if r.key.sensors[0] == s])
-            sim = np.array([r.sim for r in levels if r.key.sensors[0] == s])
+            real, sim = (np.array(v) for v in zip(*[(r.real, r.sim) for r in cells[s]]))
             g, a = np.polyfit(sim, real, 1) if np.ptp(sim) > 1 else (1.0, real.mean() - sim.mean())
             gains.append(round(float(g), 4))
             offsets.append(round(float(a - DARK * (1 - g)), 2))

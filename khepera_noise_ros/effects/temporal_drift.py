@@ -2,9 +2,8 @@
 
 The fit: extra autocorrelation of the residuals (or of each sensor's own part, which
 noise shared by all sensors cannot hide), level offsets no fixed calibration makes, or
-levels moving together from run to run (a shared change).  A wander of each sensor's
-own also moves the shared factor a little, so where both show, a shared change and the
-own wanders are both fitted and the simulator chooses.
+levels moving together from run to run (a shared change).  An own wander also moves the
+shared factor a little: where both show, both are fitted and the simulator chooses.
 """
 from __future__ import annotations
 
@@ -17,7 +16,7 @@ from scipy import stats as sps
 from scipy.optimize import minimize
 
 from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, ar1, columns, param, rows
-from .fitting import ALPHA, Z_DETECT, by_condition, holm, names
+from .fitting import Z_DETECT, by_condition, by_sensor, names, significant
 
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 # Nelder-Mead objectives: 16, or 10 inside the box the own wanders bound (there the later
@@ -36,13 +35,10 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
     time_constant: float = param(30.0, 'correlation time, samples', above=0.0)
     shared: bool = param(True, 'one wander for all the sensors (else one each)')
 
-    def _width(self, located: list[int]) -> int:
-        return 1 if self.shared else len(located)
-
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
         located = rows(self.sensors, channels)
         a = math.exp(-1.0 / self.time_constant)
-        state = self.sd * rng.standard_normal((self._width(located), robots))
+        state = self.sd * rng.standard_normal((1 if self.shared else len(located), robots))
 
         def step(level: Array) -> Array:
             nonlocal state
@@ -55,7 +51,7 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
         a = math.exp(-1.0 / self.time_constant)
-        z = rng.standard_normal((level.shape[0], self._width(rows(self.sensors, level.shape[1])),
+        z = rng.standard_normal((level.shape[0], 1 if self.shared else len(self.sensors),
                                  level.shape[2]))
         z[0] *= self.sd
         z[1:] *= math.sqrt(1 - a * a) * self.sd
@@ -72,8 +68,8 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
         change = evidence.shared_change()
         moved = bool(change and change['significant'])
         if not located and not moved:
-            return Candidate(cls.name, None, 'no extra autocorrelation over time and no level '
-                                             'offsets beyond a fixed calibration')
+            return cls.nothing('no extra autocorrelation over time and no level offsets '
+                               'beyond a fixed calibration')
         searches = []
         if moved:
             searches.append(_search(evidence, acf, own, tuple(evidence.channels), change))
@@ -93,11 +89,9 @@ def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
     change shared by all sensors from the run-to-run factors (``change``), or a wander on
     ``sensors`` bounded by their own wanders' size and time."""
     moved = change is not None
-    chans = evidence.channels
-    slow = evidence.group_evidence('slow')
-    idx = [chans.index(s) for s in sensors]
-    shared = moved or len(idx) > 1 and \
-        slow[np.ix_(idx, idx)][~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
+    idx = [evidence.channels.index(s) for s in sensors]
+    slow = evidence.group_evidence('slow')[np.ix_(idx, idx)]
+    shared = moved or len(idx) > 1 and slow[~np.eye(len(idx), dtype=bool)].mean() > Z_DETECT
     rho = {lag: float(np.mean([r.real - r.sim for r in acf
                                if r.key.sensors[0] in sensors and r.key.part == f'lag {lag}']
                               or [np.nan])) for lag in (1, 3)}
@@ -142,30 +136,23 @@ def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
     return effect, best, sensors, moved
 
 
-def _unexplained_levels(levels: list[Row]) -> tuple[int, ...]:
+def _unexplained_levels(levels: list[Row]) -> list[int]:
     """Sensors whose levels stay off after the best fixed gain and offset: run-to-run
     offsets a calibration cannot make (chi-square of the line's residuals, Holm)."""
-    sensors = sorted({r.key.sensors[0] for r in levels})
-    p = []
-    for sensor in sensors:
-        mine = [r for r in levels if r.key.sensors[0] == sensor]
+    cells, p = by_sensor(levels), []
+    for mine in cells.values():
         real, sim, se = (np.array(v) for v in zip(*[(r.real, r.sim, r.se) for r in mine]))
         if real.size < 4 or np.ptp(sim) < 1:
             p.append(1.0)
-            continue
-        line = np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim)
-        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), real.size - 2)))
-    adjusted = holm(np.array(p)) if p else np.array([])
-    return tuple(s for s, q in zip(sensors, adjusted) if q < ALPHA)
+        else:
+            line = np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim)
+            p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), real.size - 2)))
+    return significant(cells, p)
 
 
-def _combined_excess(acf: list[Row]) -> tuple[int, ...]:
+def _combined_excess(acf: list[Row]) -> list[int]:
     """Sensors whose autocorrelations lie above the simulation's taken together
     (Stouffer's z over conditions and lags, Holm over sensors)."""
-    by: dict[int, list[float]] = {}
-    for r in acf:
-        by.setdefault(r.key.sensors[0], []).append(r.z)
-    sensors = sorted(by)
-    z = np.array([np.sum(by[s]) / np.sqrt(len(by[s])) for s in sensors])
-    p = holm(sps.norm.sf(z))
-    return tuple(s for s, q in zip(sensors, p) if q < ALPHA)
+    cells = by_sensor(acf)
+    z = np.array([np.sum([r.z for r in v]) / np.sqrt(len(v)) for v in cells.values()])
+    return significant(cells, sps.norm.sf(z))
