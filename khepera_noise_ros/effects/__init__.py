@@ -65,14 +65,11 @@ def loads(text: str) -> tuple[Effect, ...]:
         return ()
     try:
         data = json.loads(text)
+        if not isinstance(data, list):
+            raise ValueError(f'effects must be a JSON list, got {type(data).__name__}')
+        return tuple(from_dict(d) for d in data)
     except json.JSONDecodeError as exc:
         raise ValueError(f'effects must be a JSON list of effects, got {text[:60]!r} '
                          f'({exc.msg})') from None
-    except RecursionError:
-        raise ValueError('effects: JSON nested too deeply') from None
-    if not isinstance(data, list):
-        raise ValueError(f'effects must be a JSON list, got {type(data).__name__}')
-    try:
-        return tuple(from_dict(d) for d in data)
     except RecursionError:
         raise ValueError('effects: JSON nested too deeply') from None

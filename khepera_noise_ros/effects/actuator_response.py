@@ -1,11 +1,11 @@
-"""``actuator_response``: the turn made for each commanded size and direction: a dead-band
-(static friction eats that many degrees of every turn), a gain beyond it, its own to each
-side, optionally a scale per commanded size, and scatter.
+"""``actuator_response``: the turn made for each commanded size and direction.
 
-The fit: measured turns (tracked headings, or the turn-calibration protocol) by weighted
-least squares.  Without them it is not fitted (the closed loop's statistics alone confound
-its form with the noise; the turn error there is ``actuator_turn_error``'s), nor where a
-plain scale fits as well.
+A dead-band (static friction eats that many degrees of every turn), a gain beyond it, its
+own to each side, optionally a scale per commanded size, and scatter.  The fit: measured
+turns (tracked headings, or the turn-calibration protocol) by weighted least squares.
+Without them it is not fitted (the closed loop's statistics alone confound its form with
+the noise; the turn error there is ``actuator_turn_error``'s), nor where a plain scale
+fits as well.
 """
 from __future__ import annotations
 

@@ -2,9 +2,10 @@
 
 An effect is a frozen dataclass whose fields are its parameters, each declared once with
 ``param`` (a description and the values allowed); constructing one checks every field,
-so an effect that exists is valid.  It names the ``Stage`` it acts on, simulates a batch
-step by step (``start``) or a whole run at once (``over_time``: the same numbers), fits
-itself through the ``Evidence`` the diagnosis gives it, and travels as a dict.
+so an effect that exists is valid.  Its class keywords name it and the ``Stage`` it acts
+on.  It simulates a batch step by step (``start``) or a whole run at once (``over_time``:
+the same numbers; an effect without memory writes ``act`` for both), fits itself through
+the ``Evidence`` the diagnosis gives it, and travels as a dict.
 """
 from __future__ import annotations
 
@@ -143,8 +144,7 @@ class Effect:
         return list(self.sensors)
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        """A fresh state for ``robots`` episodes: a function of one sample (by default
-        ``act`` on it, which is right for an effect that keeps nothing between samples)."""
+        """A fresh state for ``robots`` episodes: a function of one sample."""
         rows(self.sensors, channels)
         if self.stage is Stage.ACTUATOR:       # a sample: the robots' turns, of any shape
             return lambda deg: self.act(np.reshape(deg, (1, 1, -1)), rng).reshape(np.shape(deg))
@@ -155,7 +155,8 @@ class Effect:
         return self.act(level, rng)
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
-        """A memoryless effect on (samples, channels, robots), its draws sample by sample."""
+        """``over_time`` of an effect without memory, drawing sample by sample: then one
+        sample is a step."""
         raise NotImplementedError
 
     def table(self, table: Array, world: Any) -> Array:

@@ -24,11 +24,7 @@ THRESHOLD = 4.0
 @dataclass(frozen=True)
 class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1,
                       summary='fast noise shared within groups of sensors (dependence groups)'):
-    """Normal noise shared within each group, sd ``strength`` x the group's mean level (the
-    paper's dependent noise) plus ``constant`` readings whatever the level."""
-
-    groups: tuple[tuple[int, ...], ...] = param((), 'groups of sensors that share noise',
-                                                'groups')
+    groups: tuple[tuple[int, ...], ...] = param((), 'groups of sensors that share noise', 'groups')
     strength: float = param(0.01, 'sd as a fraction of the group\'s mean level', low=0.0)
     constant: float = param(0.0, 'sd in readings, whatever the level', low=0.0)
 

@@ -1,11 +1,11 @@
-"""``intensity_dependent_noise``: noise whose size follows a law of the light level,
-sd(r) = constant + strength * u * (u / scale) ** exponent with u = r ('dark': the noise
-grows with darkness, the Khepera's 525 end, as a room's flicker) or u = scale - r.
+"""``intensity_dependent_noise``: noise whose size follows a law of the light level.
 
-The fit: on the sensors whose fast noise is shared beyond the simulator's (one shared
-draw), else on those with extra spread (a draw each), the laws that fit the cells'
-excess variance best (non-negative least squares on the sd over a grid of directions
-and exponents), then judged by the simulator.
+sd(r) = constant + strength * u * (u / scale) ** exponent with u = r ('dark': the noise
+grows with darkness, the Khepera's 525 end, as a room's flicker) or u = scale - r; one
+draw for all the sensors if ``shared``.  The fit: on the sensors whose fast noise is
+shared beyond the simulator's (one shared draw), else on those with extra spread (a draw
+each), the laws that fit the cells' excess variance best (non-negative least squares on
+the sd over a grid of directions and exponents), then judged by the simulator.
 """
 from __future__ import annotations
 
@@ -30,9 +30,6 @@ SPREADS = ('spread', 'loop_still_spread', 'loop_residual_spread', 'loop_change_s
 class IntensityDependentNoise(
         Effect, name='intensity_dependent_noise', stage=Stage.LIGHT, free=2,
         summary='noise amplitude or correlation that changes with the light level'):
-    """Normal noise of sd ``constant + strength * u * (u / scale) ** exponent``; one draw
-    for all ``sensors`` at once if ``shared`` (a flicker), else one per sensor."""
-
     sensors: tuple[int, ...] = param((), 'sensors with the extra noise', 'sensors')
     strength: float = param(0.03, 'size of the law (sd per reading of u)', low=0.0)
     exponent: float = param(1.0, 'exponent of the law', low=-1.0)

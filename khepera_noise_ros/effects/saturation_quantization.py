@@ -1,9 +1,9 @@
-"""``saturation_quantization``: the sensor's converter: readings held at a floor or a
-ceiling, on a lattice coarser than the model's, or lost (replaced by a dropout value).
+"""``saturation_quantization``: the sensor's converter.
 
-The fit reads the converter's evidence (``Evidence.converter``: the limits the real
-readings pile up at, each sensor's lattice, the dropouts) and lets the simulator choose
-among the combinations that evidence allows.
+Readings held at a floor or a ceiling, on a lattice coarser than the model's, or lost
+(replaced by a dropout value).  The fit reads the converter's evidence (the limits the
+real readings pile up at, each sensor's lattice, the dropouts) and lets the simulator
+choose among the combinations that evidence allows.
 """
 from __future__ import annotations
 
@@ -22,9 +22,6 @@ from .fitting import STATIONARY, names, present
 class SaturationQuantization(
         Effect, name='saturation_quantization', stage=Stage.READING, free=3,
         summary='readings clipped at a floor or ceiling, on a coarser lattice, or dropping out'):
-    """``sensors`` rounded to the lattice origin + k * ``step``, held in [low, high]; with
-    probability ``dropout`` a reading is lost and reads ``dropout_value`` instead."""
-
     sensors: tuple[int, ...] = param((), 'sensors of the converter', 'sensors')
     low: float = param(0.0, 'floor: no reading lies below')
     high: float = param(DARK, 'ceiling: no reading lies above')

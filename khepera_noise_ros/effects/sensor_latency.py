@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Array, Candidate, Effect, Evidence, Stage, Step, columns, param, rows
-from .fitting import CLOSED_LOOP, STATIONARY, Z_DETECT, names, present
+from .fitting import CLOSED_LOOP, STATIONARY, Z_DETECT, by_sensor, names, present
 
 
 @dataclass(frozen=True)
@@ -51,12 +51,9 @@ class SensorLatency(Effect, name='sensor_latency', stage=Stage.READING, free=1,
                  if str(r.key.part).startswith('sample 0') and r.z > Z_DETECT]
         if first:
             sensors = tuple(sorted(first))
-            lag: dict[int, float] = {}
-            for r in steps:
-                if r.key.sensors[0] in sensors:
-                    lag[r.key.sensors[0]] = lag.get(r.key.sensors[0], 0.0) + float(
-                        np.clip(r.real, 0, 1))
-            delay = max(1, int(round(np.median(list(lag.values())))))
+            cells = by_sensor(steps)     # the samples each sensor's response lags
+            lag = [sum(float(np.clip(r.real, 0, 1)) for r in cells[s]) for s in set(sensors)]
+            delay = max(1, int(round(np.median(lag))))
             timed = len({r.key.part for r in steps})     # samples the step response covers
             if delay >= timed:
                 kinds = present(evidence, (STATIONARY,))
@@ -67,7 +64,7 @@ class SensorLatency(Effect, name='sensor_latency', stage=Stage.READING, free=1,
         turned = {r.key.sensors[0] for r in evidence.rows('sensor_turn_response')
                   if abs(r.z) > Z_DETECT}
         if not turned:
-            return Candidate(cls.name, None, 'readings follow heading changes at once')
+            return cls.nothing('readings follow heading changes at once')
         # sensors whose turn responses pass for simulated can lag too: their closed-loop
         # noise residuals then take the earlier heading's light; the simulator judges on
         # the statistics other than the noise ones (other sensor effects act there too)

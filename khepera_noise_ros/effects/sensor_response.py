@@ -1,10 +1,11 @@
-"""``sensor_response``: a sensor follows its light late (a fractional delay) and gradually
-(a first-order lag, its own rate towards bright and towards dark).
+"""``sensor_response``: a sensor follows its light late and gradually.
 
-The fit: the step response after a change of heading (stationary ``step_response``,
-``turn_step_response`` of rests after a turn) by least squares on its analytic form.  A
-whole delay with rate 1 is ``sensor_latency``'s case, and so is a delay seen only in the
-closed loop: there the turn responses alone confound a lag with the turn made.
+A fractional delay, then a first-order lag with its own rate towards bright and towards
+dark.  The fit: the step response after a change of heading (stationary
+``step_response``, ``turn_step_response`` of rests after a turn) by least squares on its
+analytic form.  A whole delay with rate 1 is ``sensor_latency``'s case, and so is a delay
+seen only in the closed loop: there the turn responses alone confound a lag with the
+turn made.
 """
 from __future__ import annotations
 
@@ -35,8 +36,7 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
                              above=0.0, high=1.0)
 
     def _split(self) -> tuple[int, float]:
-        n = int(math.floor(self.delay))
-        return n, self.delay - n
+        return int(math.floor(self.delay)), self.delay - int(math.floor(self.delay))
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
         located = rows(self.sensors, channels)
@@ -92,10 +92,10 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
         slow = sorted({r.key.sensors[0] for r in steps if r.z > Z_DETECT})
         if not slow:
             turned = any(abs(r.z) > Z_DETECT for r in evidence.rows('sensor_turn_response'))
-            return Candidate(cls.name, None, 'no step response slower than simulated (changes '
-                                             'of heading, or record --protocol turns)' + (
-                                                 '; the delay the closed loop shows is '
-                                                 'sensor_latency\'s' if turned else ''))
+            return cls.nothing('no step response slower than simulated (changes of heading, or '
+                               'record --protocol turns)' + (
+                                   '; the delay the closed loop shows is sensor_latency\'s'
+                                   if turned else ''))
         delay, bright, dark = _analytic([r for r in steps if r.key.sensors[0] in slow])
         how = 'step responses' + (' after turns' if steps[-1].key.family.startswith(
             'turn') else ' after changes of heading')
@@ -107,14 +107,13 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
             slow = sorted(set(slow) | set(evidence.channels))
         if min(bright, dark) >= 1.0 and delay >= 1 - WHOLE and \
                 abs(delay - round(delay)) <= WHOLE:
-            return Candidate(cls.name, None, f'{how}: a whole-step delay of {round(delay)} '
-                                             f'(sensor_latency\'s case)')
+            return cls.nothing(f'{how}: a whole-step delay of {round(delay)} (sensor_latency\'s '
+                               'case)')
         if delay == 0.0 and min(bright, dark) >= 1.0:
-            return Candidate(cls.name, None, f'{how}: no delay and no lag')
+            return cls.nothing(f'{how}: no delay and no lag')
         effect = cls(tuple(slow), float(delay), float(bright), float(dark))
         return Candidate(cls.name, effect, f'{how} of {names(slow)}: delay {delay:g} samples, '
-                                           f'rate {bright:g} towards bright, {dark:g} '
-                                           f'towards dark')
+                         f'rate {bright:g} towards bright, {dark:g} towards dark')
 
 
 def response(delay: float, rate: float, samples: int) -> Array:
@@ -137,17 +136,15 @@ def _analytic(steps: list[Row]) -> tuple[float, float, float]:
         return int(str(r.key.part).split()[1])
     size = max(sample(r) for r in steps) + 1
     table = {(d, k): response(d, k, size) for d in DELAYS for k in RATES}
+    sides = {side: [r for r in steps if side in str(r.key.part) or 'change' in str(r.key.part)]
+             for side in ('bright', 'dark')}
+    cells = {side: (np.array([sample(r) for r in mine]), np.array([r.real for r in mine]),
+                    1.0 / np.maximum(np.array([r.se for r in mine]), 0.01) ** 2)
+             for side, mine in sides.items() if mine}
     best = (math.inf, 0.0, 1.0, 1.0)
     for d in DELAYS:
-        cost, rate = 0.0, {}
-        for side in ('bright', 'dark'):
-            mine = [r for r in steps if side in str(r.key.part) or 'change' in str(r.key.part)]
-            if not mine:
-                rate[side] = 1.0
-                continue
-            j = np.array([sample(r) for r in mine])
-            real = np.array([r.real for r in mine])
-            w = 1.0 / np.maximum(np.array([r.se for r in mine]), 0.01) ** 2
+        cost, rate = 0.0, {'bright': 1.0, 'dark': 1.0}
+        for side, (j, real, w) in cells.items():
             errors = [float((w * (real - table[(d, k)][j]) ** 2).sum()) for k in RATES]
             i = int(np.argmin(errors))
             rate[side], cost = float(RATES[i]), cost + errors[i]
