@@ -56,7 +56,6 @@ class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, f
         return out * np.interp(size, self.sizes, self.scales) if self.sizes else out
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
-        """Commanded turns (samples, 1, robots) in degrees, made."""
         out = self.mean(level)
         if self.scatter or self.jitter:
             z = rng.standard_normal((level.shape[0], 2) + level.shape[1:])
@@ -79,8 +78,7 @@ class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, f
         how = f'{len(turns)} turns measured'
         if plain:
             return cls.nothing(f'{how}: a plain scale of the turn (actuator_turn_error\'s case)')
-        table = f', scale by size {dict(zip(effect.sizes, effect.scales))}' if effect.sizes \
-            else ''
+        table = f', scale by size {dict(zip(effect.sizes, effect.scales))}' if effect.sizes else ''
         return Candidate(cls.name, effect, f'{how}: dead-band {effect.dead_band:g} deg, gain '
                          f'{effect.gain:g}, asymmetry {effect.asymmetry:g}{table}, scatter '
                          f'{effect.scatter:g}, jitter {effect.jitter:g} deg')
@@ -99,8 +97,7 @@ def _form(c: Array, e: Array, w: Array) -> tuple[ActuatorResponse, float]:
                 for side, at in ((1.0, c > 0), (-1.0, c < 0))]
         return fits[0][0], fits[1][0], fits[0][1] + fits[1][1]
     (right, left, rss), band = min(((sides(b), b) for b in BANDS), key=lambda f: f[0][2])
-    asym = float(np.clip((right - left) / (right + left), -0.9, 0.9)) if right + left > 0 \
-        else 0.0
+    asym = float(np.clip((right - left) / (right + left), -0.9, 0.9)) if right + left > 0 else 0.0
     return ActuatorResponse(float(band), round((right + left) / 2, 4), round(asym, 4)), rss
 
 

@@ -37,7 +37,6 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
     creep: float = param(0.0, 'sd of a slip of fixed size, degrees per step', low=0.0)
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
-        """Commanded turns (samples, 1, robots) in degrees, executed."""
         # the creep drawn only when set: older effects keep their streams
         draws = rng.standard_normal((level.shape[0], 2 if self.creep else 1) + level.shape[2:])
         out = level * self.scale + self.slip * np.abs(level) * draws[:, :1]
@@ -81,8 +80,7 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
         slip = golden(lambda x: objective(scale, x, creep), 0.0, SLIP_MAX, 9)
         scale = golden(lambda x: objective(x, slip, creep), scale * 0.9, scale * 1.1, 6)
         creep = golden(lambda x: objective(scale, slip, x), 0.0, CREEP_MAX, 7) if creeps else 0.0
-        scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4),
-                                       round(creep, 3))
+        scale, slip, creep = _simplest(objective, round(scale, 4), round(slip, 4), round(creep, 3))
         effect = cls(scale, slip, creep=creep)
         note = f'turn response {ratio:.2f} times the simulated'
         scatter = sorted({str(k.part) for f in SCATTER for k in flagged[f]})

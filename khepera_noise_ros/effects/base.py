@@ -155,8 +155,8 @@ class Effect:
         return self.act(level, rng)
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
-        """``over_time`` of an effect without memory, drawing sample by sample: then one
-        sample is a step."""
+        """``over_time`` of an effect without memory, drawing sample by sample (then one
+        sample is a step); an actuator's level is the commanded turns, degrees."""
         raise NotImplementedError
 
     def table(self, table: Array, world: Any) -> Array:

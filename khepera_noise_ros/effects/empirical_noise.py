@@ -53,8 +53,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         spread = np.asarray(self.spread, float).reshape(n, len(self.levels))
         mix = np.asarray(self.mixing, float).reshape(n, n) if self.mixing else np.eye(n)
         slow = np.asarray(self.slow_sd, float) if self.slow_sd else np.zeros(n)
-        smix = np.asarray(self.slow_mixing, float).reshape(n, n) if self.slow_mixing \
-            else np.eye(n)
+        smix = np.asarray(self.slow_mixing, float).reshape(n, n) if self.slow_mixing else np.eye(n)
         return spread, mix, slow, smix
 
     def _fast(self, level: Array, z: Array, spread: Array, mix: Array) -> Array:
@@ -114,8 +113,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         slow_sd = np.sqrt(slow_extra / np.clip(mr['level2'], 1.0, None))
         with np.errstate(invalid='ignore', divide='ignore'):
             ratio = (mr['lag'] - ms['lag']) / np.where(slow_extra > 0, slow_extra, np.nan)
-            rho = np.nanmedian(np.clip(ratio, 0.01, 0.99)) if np.isfinite(ratio).any() \
-                else np.nan
+            rho = np.nanmedian(np.clip(ratio, 0.01, 0.99)) if np.isfinite(ratio).any() else np.nan
         tau = -WINDOW / math.log(rho) if np.isfinite(rho) else 30.0
         slow_mix = _factor(mr['slow'] - ms['slow'])
         if not (spread.any() or slow_sd.any()):

@@ -67,8 +67,7 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
         grid = np.arange(table.shape[1]) * (360.0 / table.shape[1])
         levels = np.reshape(self.levels, (len(self.lamps), len(self.sensors), -1))[c]
         knots = np.asarray(self.bearings)
-        at = np.rint(np.mod(knots, 360.0) * table.shape[1] / 360.0).astype(int) \
-            % table.shape[1]
+        at = np.rint(np.mod(knots, 360.0) * table.shape[1] / 360.0).astype(int) % table.shape[1]
         for i, s in enumerate(rows(self.sensors, table.shape[0])):
             if self.between == 'level':
                 out[s] = around(grid, knots, levels[i])

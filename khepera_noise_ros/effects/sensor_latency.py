@@ -68,8 +68,7 @@ class SensorLatency(Effect, name='sensor_latency', stage=Stage.READING, free=1,
         # sensors whose turn responses pass for simulated can lag too: their closed-loop
         # noise residuals then take the earlier heading's light; the simulator judges on
         # the statistics other than the noise ones (other sensor effects act there too)
-        noisy = {r.key.sensors[0] for r in evidence.rows('loop_residual_spread')
-                 if r.z > Z_DETECT}
+        noisy = {r.key.sensors[0] for r in evidence.rows('loop_residual_spread') if r.z > Z_DETECT}
         options = {tuple(sorted(turned)), tuple(evidence.channels), tuple(sorted(turned | noisy))}
         delayed = evidence.delayed_sensors()
         if delayed:

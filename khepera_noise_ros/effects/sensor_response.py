@@ -105,8 +105,7 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
         slow = sorted(set(slow) | (timed - _faster(steps, delay, bright, dark)))
         if set(slow) >= timed:
             slow = sorted(set(slow) | set(evidence.channels))
-        if min(bright, dark) >= 1.0 and delay >= 1 - WHOLE and \
-                abs(delay - round(delay)) <= WHOLE:
+        if min(bright, dark) >= 1.0 and delay >= 1 - WHOLE and abs(delay - round(delay)) <= WHOLE:
             return cls.nothing(f'{how}: a whole-step delay of {round(delay)} (sensor_latency\'s '
                                'case)')
         if delay == 0.0 and min(bright, dark) >= 1.0:
