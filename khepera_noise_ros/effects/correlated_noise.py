@@ -37,9 +37,7 @@ class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1
         return [list(g) for g in self.groups]
 
     def parameters(self) -> dict[str, Any]:
-        out = super().parameters()
-        out['groups'] = self.location
-        return out
+        return {**super().parameters(), 'groups': self.location}
 
     def act(self, level: Array, rng: np.random.Generator) -> Array:
         located = [rows(g, level.shape[1]) for g in self.groups]
@@ -52,8 +50,7 @@ class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
-        channels = evidence.channels
-        found = [tuple(channels[i] for i in g)
+        found = [tuple(evidence.channels[i] for i in g)
                  for g in groups_of(evidence, evidence.group_evidence('fast'))]
         if not found:
             return cls.nothing('no sensors whose noise is more correlated than simulated')

@@ -48,13 +48,15 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         return '' if ok else ('needs one spread per sensor and level, n x n mixings and one '
                               'slow_sd per sensor')
 
-    def _arrays(self) -> tuple[Array, Array, Array, Array]:
-        n = len(self.sensors)
+    def _arrays(self, channels: int) -> tuple[list[int], Array, Array, Array, Array, float]:
+        """The rows, the fast sd at the knots and mixing, the slow sd and mixing, and the
+        slow part's AR(1) coefficient."""
+        located, n = rows(self.sensors, channels), len(self.sensors)
         spread = np.asarray(self.spread, float).reshape(n, len(self.levels))
         mix = np.asarray(self.mixing, float).reshape(n, n) if self.mixing else np.eye(n)
         slow = np.asarray(self.slow_sd, float) if self.slow_sd else np.zeros(n)
         smix = np.asarray(self.slow_mixing, float).reshape(n, n) if self.slow_mixing else np.eye(n)
-        return spread, mix, slow, smix
+        return located, spread, mix, slow, smix, math.exp(-1.0 / self.slow_time_constant)
 
     def _fast(self, level: Array, z: Array, spread: Array, mix: Array) -> Array:
         """Fast noise of (sensors, ...) levels from (sensors, ...) normal draws."""
@@ -63,9 +65,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         return out
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        located = rows(self.sensors, channels)
-        spread, mix, slow, smix = self._arrays()
-        a = math.exp(-1.0 / self.slow_time_constant)
+        located, spread, mix, slow, smix, a = self._arrays(channels)
         state = smix @ rng.standard_normal((len(located), robots))
 
         def step(level: Array) -> Array:
@@ -79,9 +79,7 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         return step
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
-        located = rows(self.sensors, level.shape[1])
-        spread, mix, slow, smix = self._arrays()
-        a = math.exp(-1.0 / self.slow_time_constant)
+        located, spread, mix, slow, smix, a = self._arrays(level.shape[1])
         t, n, r = level.shape[0], len(located), level.shape[2]
         d = rng.standard_normal((2 * t + 1, n, r))       # as ``start`` draws: slow, fast, ...
         z = np.einsum('ij,tjr->tir', smix, d[0:2 * t:2])
@@ -165,5 +163,4 @@ def _factor(cov: Array) -> Array:
     w, v = np.linalg.eigh((corr + corr.T) / 2)
     corr = (v * np.clip(w, 1e-6, None)) @ v.T
     d = np.sqrt(np.diag(corr))
-    out: Array = np.linalg.cholesky(corr / d[:, None] / d[None, :])
-    return out
+    return np.linalg.cholesky(corr / d[:, None] / d[None, :])

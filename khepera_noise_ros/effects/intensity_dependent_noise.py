@@ -53,16 +53,15 @@ class IntensityDependentNoise(
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
-        channels = evidence.channels
         z = evidence.group_evidence('fast')
         found = groups_of(evidence, z)
+        shared = bool(found)
         if found:
             best = max(found, key=lambda g: z[np.ix_(g, g)].sum())
-            sensors, shared = tuple(channels[i] for i in best), True
+            sensors = tuple(evidence.channels[i] for i in best)
         else:
             sensors = tuple(sorted({r.key.sensors[0] for f in SPREADS for r in evidence.rows(f)
                                     if r.z > Z_DETECT}))
-            shared = False
         if not sensors:
             return cls.nothing('no extra spread or shared noise to explain')
         options = [cls(sensors, round(k, 6), e, DARK, round(c0, 4), d, shared)
@@ -79,7 +78,6 @@ class IntensityDependentNoise(
             chosen = effect
             effect = refine(evidence, lambda s: dataclasses.replace(chosen, strength=s),
                             effect.strength, evaluations=5)
-        assert isinstance(effect, cls)
         u, grows = ('r', 'darkness') if effect.direction == 'dark' else ('(525 - r)', 'brightness')
         kind = 'one shared draw' if shared else 'a draw per sensor'
         return Candidate(cls.name, effect, f'extra spread on {names(sensors)}: sd = '
@@ -93,8 +91,7 @@ def shape(level: Array | float, direction: str, exponent: float, scale: float = 
     u = r if direction == 'dark' else scale - r
     with np.errstate(divide='ignore', invalid='ignore'):
         out = u * (u / scale) ** exponent
-    law: Array = np.where(u > 0, np.nan_to_num(out, nan=0.0, posinf=0.0), 0.0)
-    return law
+    return np.where(u > 0, np.nan_to_num(out, nan=0.0, posinf=0.0), 0.0)
 
 
 def laws(cells: Sequence[tuple[float, float]]) -> list[tuple[str, float, float, float, float]]:

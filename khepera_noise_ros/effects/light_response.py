@@ -125,11 +125,9 @@ def around(x: Array, knots: Array, values: Array) -> Array:
     order = np.argsort(np.mod(knots, 360.0))
     k, v = np.mod(knots, 360.0)[order], np.asarray(values, np.float64)[order]
     if k.size < 4:
-        out: Array = np.interp(np.mod(x, 360.0), k, v, period=360.0)
-        return out
+        return np.interp(np.mod(x, 360.0), k, v, period=360.0)
     curve = Akima1DInterpolator(np.r_[k[-3:] - 360.0, k, k[:3] + 360.0], np.r_[v[-3:], v, v[:3]])
-    result: Array = np.asarray(curve(np.mod(x, 360.0)), np.float64)
-    return result
+    return np.asarray(curve(np.mod(x, 360.0)), np.float64)
 
 
 def _bearing(r: Row) -> float | None:

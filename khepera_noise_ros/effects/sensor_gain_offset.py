@@ -33,8 +33,7 @@ class SensorGainOffset(Effect, name='sensor_gain_offset', stage=Stage.LIGHT, fre
         located = rows(self.sensors, level.shape[1])
         g, o = np.ones((level.shape[1], 1)), np.zeros((level.shape[1], 1))
         g[located, 0], o[located, 0] = self.gains, self.offsets
-        out: Array = self.anchor - g * (self.anchor - level) + o
-        return out
+        return self.anchor - g * (self.anchor - level) + o
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
