@@ -287,15 +287,16 @@ PAIRS = tuple((k, m) for k in range(8) for m in range(k + 1, 8))
 
 
 def stats(b: bootstrap.Blocks, s: Array, more: Part) -> tuple[list[Key], list[Array]]:
-    """(keys, (R,) columns) from the resampled (R, S, D) per-episode sums; ``more``: the
-    converter's statistics of each stratum."""
-    out: Columns = []
+    """(keys, columns) from the resampled (R, S, D) per-episode sums; ``more``: the
+    converter's statistics of each stratum (its columns may be (R, k) blocks)."""
+    keys: list[Key] = []
+    cols: list[Array] = []
     n = b.part(s, 'n')[..., 0]
     front = (0, 1, 2, 3, 4, 5)
     lags = ('lag 0', 'lag 1')
     for i, c in enumerate(b.strata):
         level = b.part(s, 'level')[:, i] / n[:, i, None]
-        out += [(Key('closed_loop_level', (k,), c, None), level[:, k]) for k in range(8)]
+        out: Columns = [(Key('closed_loop_level', (k,), c, None), level[:, k]) for k in range(8)]
         factor, count = b.part(s, 'factor')[:, i], b.part(s, 'phase_n')[:, i]
         power = b.part(s, 'power')[:, i] / count
         for p in range(b.extra['perturb_every']):
@@ -315,8 +316,10 @@ def stats(b: bootstrap.Blocks, s: Array, more: Part) -> tuple[list[Key], list[Ar
             h = b.part(s, 'heading_band')[:, i].sum(axis=1)
             out.append((Key('turn_size', (), c, 'deg per unit of command'), h[:, 2] / h[:, 1]))
         out += _noise_stats(b, s, i, c) + _change_stats(b, s, i, c) + _scatter_stats(b, s, i, c)
-        out += zip(*more(b, s, i, c))
-    return [k for k, _ in out], [v for _, v in out]
+        more_keys, more_cols = more(b, s, i, c)
+        keys += [k for k, _ in out] + more_keys
+        cols += [v for _, v in out] + more_cols
+    return keys, cols
 
 
 def _noise_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> Columns:

@@ -25,25 +25,32 @@ CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
 
 # -- groups ----------------------------------------------------------------------------
 
-def part_sums(rec: Recording, part: str) -> dict[str, list[Any]]:
+def part_sums(recs: Sequence[Recording], part: str) -> dict[str, list[Any]]:
     """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
-    residuals."""
-    used = list(rec.channels_used)
+    residuals, pooled over ``recs``."""
     out: dict[str, list[Any]] = {}
-    for r in runs(rec):
-        y = rec.readings[r][:, used].astype(np.float64)
-        if part == 'fast':
-            d = np.diff(y, axis=0)
-        else:
-            k = y.shape[0] // WINDOW
-            d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
-        if d.shape[0] < 2:
-            continue
-        d = d - d.mean(axis=0) if part == 'fast' else d
-        acc = out.setdefault(str(rec.condition[r[0]]), [0.0, 0])
-        acc[0] = acc[0] + d.T @ d
-        acc[1] += d.shape[0]
+    for rec in recs:
+        mine: dict[str, list[Any]] = {}
+        for r in runs(rec):
+            y = rec.readings[r][:, list(rec.channels_used)].astype(np.float64)
+            if part == 'fast':
+                d = np.diff(y, axis=0)
+            else:
+                k = y.shape[0] // WINDOW
+                d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
+            if d.shape[0] < 2:
+                continue
+            d = d - d.mean(axis=0) if part == 'fast' else d
+            _add(mine, str(rec.condition[r[0]]), d.T @ d, d.shape[0])
+        for cond, (s, n) in mine.items():
+            _add(out, cond, s, n)
     return out
+
+
+def _add(sums: dict[str, list[Any]], cond: str, s: Array, n: int) -> None:
+    acc = sums.setdefault(cond, [0.0, 0])
+    acc[0] = acc[0] + s
+    acc[1] += n
 
 
 def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
@@ -51,7 +58,7 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
     """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
     conditions (0 on the diagonal)."""
     zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))
-    pooled = [_pool([part_sums(r, part) for r in recs]) for recs in (real, sim)]
+    pooled = [part_sums(recs, part) for recs in (real, sim)]
     for cond, (sr, nr) in pooled[0].items():
         if cond not in pooled[1] or nr < 8:
             continue
@@ -63,19 +70,8 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
         ok = np.isfinite(z)
         zsum += np.where(ok, z, 0.0)
         count += ok
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    out = _stouffer(zsum, count)
     np.fill_diagonal(out, 0.0)
-    return out
-
-
-def _pool(parts: list[dict[str, list[Any]]]) -> dict[str, list[Any]]:
-    out: dict[str, list[Any]] = {}
-    for p in parts:
-        for cond, (s, n) in p.items():
-            acc = out.setdefault(cond, [0.0, 0])
-            acc[0] = acc[0] + s
-            acc[1] += n
     return out
 
 
@@ -85,20 +81,23 @@ def _corr(s: Array) -> Array:
     return out
 
 
+def _stouffer(zsum: Array, count: Array) -> Array:
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out: Array = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    return out
+
+
 def combined(rows: Sequence[tuple[tuple[int, ...], float]], channels: Sequence[int]) -> Array:
     """(C, C) Stouffer-combined z of pair rows (sensors, z)."""
     channels = list(channels)
-    n = len(channels)
-    zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    zsum, count = np.zeros((len(channels),) * 2), np.zeros((len(channels),) * 2)
     for sensors, z in rows:
         if np.isfinite(z) and all(s in channels for s in sensors):
             a, b = (channels.index(s) for s in sensors)
             for i, j in ((a, b), (b, a)):
                 zsum[i, j] += z
                 count[i, j] += 1
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out: Array = np.where(count > 0, zsum / np.sqrt(count), 0.0)
-    return out
+    return _stouffer(zsum, count)
 
 
 def loop_group_evidence(rows: Rows, channels: Sequence[int], part: str) -> Array:

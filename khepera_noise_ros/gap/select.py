@@ -379,27 +379,19 @@ def _part_chance(c: Comparison, part: str) -> float:
 def _confounded(current: Comparison, after: Comparison) -> bool:
     """Does a step bring one part well closer while another moves away?  The effects
     chosen before it, fitted without it, took part of its share: worth refitting them."""
-    closer = away = False
-    for part in PARTS:
-        d1, d2 = _part(current, part), _part(after, part)
-        limit = _part_chance(current, part)
-        closer |= d1 > limit and d1 - d2 >= MIN_LOCAL * d1
-        away |= d2 > d1 and d2 > limit
-    return closer and away
+    d = [(_part(current, p), _part(after, p), _part_chance(current, p)) for p in PARTS]
+    return any(d1 > limit and d1 - d2 >= MIN_LOCAL * d1 for d1, d2, limit in d) and \
+        any(d2 > d1 and d2 > limit for d1, d2, limit in d)
 
 
 def _local_gains(before: Comparison, current: Comparison,
                  after: Comparison) -> tuple[float, float]:
     """The largest share a step removes of one part's held-out discrepancy: (of the part
     before any effect, of what the chosen effects leave of it)."""
-    before_any = left = 0.0
-    for part in PARTS:
-        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
-        if d0 > 0:
-            before_any = max(before_any, (d1 - d2) / d0)
-        if d1 > _part_chance(current, part):
-            left = max(left, (d1 - d2) / d1)
-    return before_any, left
+    d = [[_part(c, p) for c in (before, current, after)] + [_part_chance(current, p)]
+         for p in PARTS]
+    return max([0.0] + [(d1 - d2) / d0 for d0, d1, d2, _ in d if d0 > 0]), \
+        max([0.0] + [(d1 - d2) / d1 for _, d1, d2, limit in d if d1 > limit])
 
 
 def _family_gain(b: Target, before: Comparison, current: Comparison,
