@@ -2,6 +2,7 @@
 turn responses and scatter, and the noise while turning in three views (docs/diagnosis.md)."""
 from __future__ import annotations
 
+import functools
 from typing import Callable
 
 import numpy as np
@@ -36,9 +37,7 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     heading = rec.heading_deg[order]
     tracked = bool(np.isfinite(heading).all())
     phase = (steps % perturb_every)[:, None] == np.arange(perturb_every)[None, :]
-
-    def by(values: Array) -> Array:
-        return sum_by(ep, values, m)
+    by = functools.partial(sum_by, ep, episodes=m)
     factors = np.stack(fitness_factors(r, rec.power[order]), axis=1).astype(np.float64)
     parts = {'n': by(np.ones((len(r), 1))), 'level': by(r),
              'factor': by(factors[:, :, None] * phase[:, None, :]), 'phase_n': by(phase * 1.0),

@@ -14,6 +14,7 @@ from .protocol import runs
 from .stationary import own_part
 
 Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
+Parts = list[tuple[Array, ...]]       # own_parts of several recordings
 WINDOW = 8                    # samples averaged into one value of the slow part
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
                 'loop_change_correlation')
@@ -184,8 +185,7 @@ def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[A
     return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
 
 
-def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
-               used: list[int]) -> dict[int, dict[str, Any]]:
+def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:
     """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
     (ar, cr, okr), (as_, cs, oks) = (tuple(np.concatenate([p[i] for p in parts])
                                            for i in range(3)) for parts in (real, sim))
@@ -204,9 +204,6 @@ def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
                   'acf': {lag: float(v) for lag, v in zip(OWN_LAGS, lags)},
                   'sd': float(np.sqrt(max(extra, 0.0)))}
     return out
-
-
-Parts = list[tuple[Array, ...]]
 
 
 def wandering(parts: Callable[[tuple[int, ...]], tuple[Parts, Parts]],
