@@ -278,12 +278,12 @@ def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array,
         entry['note'] = f'{cand.note}; cannot be scored: {type(exc).__name__}: {exc}'
         return entry, None, None, None
     after_reps = b.replicate_discrepancies(after)
-    reduction = 1.0 - after.discrepancy / d_before
+    share = reduction(d_before, after.discrepancy)
     # resampling biases the replicates' reduction down: shifted to the estimate's median
     reps = 1.0 - after_reps / np.maximum(before_reps, 1e-9)
-    reps += reduction - np.median(reps)
+    reps += share - np.median(reps)
     entry.update({'sensors': list(cand.effect.sensors), 'parameters': cand.effect.parameters(),
-                  'discrepancy_after': after.discrepancy, 'heldout_reduction': reduction,
+                  'discrepancy_after': after.discrepancy, 'heldout_reduction': share,
                   'reduction_interval': [float(np.quantile(reps, 0.025)),
                                          float(np.quantile(reps, 0.975))],
                   'p_value': float((np.sum(reps <= 0) + 1) / (reps.size + 1))})
