@@ -331,10 +331,10 @@ def with_rounding(config: SimConfig, rounding: str) -> SimConfig:
 
 def _lattice(t: Target, c: Comparison) -> tuple[float, Array]:
     """(the lattice statistics' part of ``c``'s discrepancy, the same per real replicate)."""
-    mask = np.array([k.family in having('lattice') for k in c.keys], bool)
-    if not mask.any():
+    part = c.select([k.family in having('lattice') for k in c.keys])
+    if not part.keys:
         return 0.0, np.zeros(max(t.real.values.shape[0] - 1, 1))
-    return c.select(mask).discrepancy, t.replicate_discrepancies(c.select(mask))
+    return part.discrepancy, t.replicate_discrepancies(part)
 
 
 def _rounding(result: Diagnosis, a: Target, b: Target, given: list[Effect],

@@ -302,10 +302,9 @@ def shared_change(real: Sequence[Recording], sim: Sequence[Recording],
     p = float(sps.f.sf(v_real / expected, d_real, d_sim))
     excess = float(np.sqrt(max(v_real - expected, 0.0)))
     plain = _shared(flat, rounds=1)     # where a condition has one run, lines absorb a change
-    runs_, k = [], 0
-    for rows in rows_real:
-        runs_.append([(row[0], float(f)) for row, f in zip(rows, plain[k:k + len(rows)])])
-        k += len(rows)
+    per_rec = np.split(plain, np.cumsum([len(rows) for rows in rows_real])[:-1])
+    runs_ = [[(row[0], float(f)) for row, f in zip(rows, factors)]
+             for rows, factors in zip(rows_real, per_rec)]
     return {'p_value': p, 'ratio': float(v_real / expected), 'excess_sd': excess,
             'significant': p < CHANGE_ALPHA and excess >= MIN_CHANGE, 'runs': runs_,
             'sd': float(np.std(plain))}
