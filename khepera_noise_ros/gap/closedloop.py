@@ -69,7 +69,7 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     parts['scatter_yy'] = sum_by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
         t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
-        dh = (heading[t + 1] - heading[t] + 180.0) % 360.0 - 180.0
+        dh = wrap(heading[t + 1] - heading[t])
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
         parts['heading_band'] = sum_by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
     parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every,
@@ -93,6 +93,12 @@ def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
         pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
     out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
+
+
+def wrap(deg: Array) -> Array:
+    """Angles in degrees wrapped to [-180, 180)."""
+    out: Array = (deg + 180.0) % 360.0 - 180.0
+    return out
 
 
 def _gram(group: np.ndarray, a: Array, b: Array, groups: int) -> Array:

@@ -205,14 +205,12 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
 
 
 def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
-           log: Callable[[str], None] | None = None,
-           notes: dict[str, str] | None = None) -> World | None:
+           log: Callable[[str], None] | None, notes: dict[str, str]) -> World | None:
     """The world model's parts among ``names`` fitted on ``a`` in order, each given those
     before it (the light shapes what a sensor follows, and both what a turn shows), then
     dropped while that lowers the held-out discrepancy on ``b``; kept if the set lowers it
     significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
-    notes = {} if notes is None else notes
     for part in (n for n in WORLD_MODEL if n in names):
         given = a.with_given(fitted)
         cand = fit_one(part, given, given.compare(replicates=FINGERPRINT_REPLICATES))

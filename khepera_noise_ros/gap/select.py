@@ -55,8 +55,7 @@ def runnable(effect: Effect) -> None:
     finite readings."""
     effect = from_dict(effect.to_dict())
     channels = max([8] + [s + 1 for s in effect.sensors])
-    rng = np.random.default_rng(0)
-    step = effect.start(2, channels, rng)
+    step = effect.start(2, channels, np.random.default_rng(0))
     if effect.stage.value == 'turn':
         out = step(np.array([10.0, -10.0]))
     else:

@@ -11,7 +11,7 @@ import numpy as np
 from ..effects.base import Array, Key
 from ..recording import Recording
 from . import bootstrap
-from .closedloop import Part, sum_by
+from .closedloop import Part, sum_by, wrap
 from .protocol import calibrating, condition_world, ordered, runs
 
 COMMANDS = tuple(range(-9, 0)) + tuple(range(1, 10))     # signed powers, + to the right
@@ -51,7 +51,7 @@ def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episo
     out = {'tc_imb': sum_by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
-        dh = _wrap(heading[ok + 1] - heading[ok])
+        dh = wrap(heading[ok + 1] - heading[ok])
         out['tc_turn'] = sum_by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
     return {**out, **_settling(r, u, ep, steps, knock, episodes)}
 
@@ -161,7 +161,7 @@ def measured(loops: Sequence[Recording], sweeps: Sequence[Recording],
         knock = knocks(rec, steps, config.task.perturb_every)
         nxt = np.r_[pair[1:], False] & ~np.r_[knock[1:], False]
         t = np.flatnonzero(nxt & (u != 0) & np.isfinite(h) & np.isfinite(np.r_[h[1:], np.nan]))
-        out.append(np.stack([u[t] * per[t], _wrap(h[t + 1] - h[t])], axis=1))
+        out.append(np.stack([u[t] * per[t], wrap(h[t + 1] - h[t])], axis=1))
         if calibrating(rec):
             out.append(_inferred(rec, sweeps, config, u * per, ep, steps, knock, h, order))
     return np.concatenate(out)
@@ -194,11 +194,6 @@ def _inferred(rec: Recording, sweeps: Sequence[Recording], config: Any, c: Array
     return np.array(out, np.float64).reshape(-1, 2)
 
 
-def _wrap(deg: Array) -> Array:
-    out: Array = (deg + 180.0) % 360.0 - 180.0
-    return out
-
-
 def _sweep(sweeps: Sequence[Recording], world: Any) -> tuple[Array, Array] | None:
     """(levels (``BEARINGS``, 8), their sd per sensor) interpolated from the stationary
     runs in ``world``'s condition, None with fewer than ``MIN_HEADINGS``."""
@@ -210,7 +205,7 @@ def _sweep(sweeps: Sequence[Recording], world: Any) -> tuple[Array, Array] | Non
             if w != world or not np.isfinite(rec.heading_deg[r[0]]) or r.size < 2:
                 continue
             x = rec.readings[r][:, :8].astype(np.float64)
-            cells.setdefault(round(float(_wrap(rec.heading_deg[r[0]])), 1), []).append(x)
+            cells.setdefault(round(float(wrap(rec.heading_deg[r[0]])), 1), []).append(x)
             spread.append(x.var(axis=0, ddof=1))
     if len(cells) < MIN_HEADINGS:
         return None
@@ -227,6 +222,6 @@ def _infer(reference: tuple[Array, Array], settled: Array, start: float, lo: flo
     levels lie nearest the settled readings."""
     table, sd = reference
     offsets = np.arange(lo, hi + GRID, GRID)
-    at = np.rint((_wrap(start + offsets) + 180.0) / GRID).astype(int) % BEARINGS.size
+    at = np.rint((wrap(start + offsets) + 180.0) / GRID).astype(int) % BEARINGS.size
     cost = (((table[at] - settled) / sd) ** 2).sum(axis=1)
     return float(offsets[int(np.argmin(cost))])
