@@ -48,8 +48,9 @@ def part_sums(recs: Sequence[Recording], part: str) -> dict[str, list[Any]]:
     return out
 
 
-def _add(sums: dict[str, list[Any]], cond: str, s: Array, n: int) -> None:
-    acc = sums.setdefault(cond, [0.0, 0])
+def _add(sums: dict[Any, list[Any]], cell: Any, s: Array, n: int) -> None:
+    """Adds sums ``s`` of ``n`` rows to ``sums[cell]`` ([sum, count])."""
+    acc = sums.setdefault(cell, [0.0, 0])
     acc[0] = acc[0] + s
     acc[1] += n
 
@@ -315,15 +316,13 @@ def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, An
     shared factor."""
     sums: dict[tuple[str, str | None], list[Any]] = {}
     for rec, runs_ in zip(real, change['runs']):
-        x = rec.readings.astype(np.float64).copy()
+        x = rec.readings.astype(np.float64)
         for r, f in runs_:
             x[r] = x[r] / f
         for r, _ in runs_:
-            h = float(np.round(rec.heading_deg[r[0]], 1))
-            cell = (str(rec.condition[r[0]]), None if not np.isfinite(h) else f'heading {h:g} deg')
-            acc = sums.setdefault(cell, [0.0, 0])
-            acc[0] = acc[0] + x[r].sum(axis=0)
-            acc[1] += r.size
+            cond, h = _cell(rec, r)
+            _add(sums, (cond, None if not np.isfinite(h) else f'heading {h:g} deg'),
+                 x[r].sum(axis=0), r.size)
     out = []
     for row in rows:
         found = sums.get((str(row.key.condition), row.key.part))
