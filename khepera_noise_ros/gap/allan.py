@@ -2,37 +2,33 @@
 tau^-1/2, a wander grows (docs/diagnosis.md, "Allan deviation")."""
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from ..effects.base import Array
 from ..recording import Recording
 from .protocol import runs as run_indices
 
 SLOPES = {'white': -0.5, 'flicker': 0.0, 'random_walk': 0.5, 'drift': 1.0}
 
 
-def oadev(y: np.ndarray, m: int, rate: float = 1.0) -> tuple[float, int]:
-    """(overlapping Allan deviation of rate data ``y`` at averaging factor ``m``, number of
-    terms); NaN with 0 terms when the series is shorter than 2m + 1 samples.
-
-    Phase x = cumsum(y) / rate (with a leading 0); sigma^2(m tau0) =
-    sum (x[i+2m] - 2 x[i+m] + x[i])^2 / (2 (m tau0)^2 (N + 1 - 2m)).
-    """
-    sq, terms = _sum_squares(np.asarray(y, np.float64), m)
-    if terms == 0:
-        return float('nan'), 0
-    tau = m / rate
-    return float(np.sqrt(sq / rate ** 2 / (2.0 * tau * tau * terms))), terms
-
-
-def _sum_squares(y: np.ndarray, m: int) -> tuple[float, int]:
-    x = np.concatenate([[0.0], np.cumsum(y)])
-    terms = x.size - 2 * m
-    if terms <= 0:
-        return 0.0, 0
-    d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
-    return float(d @ d), int(terms)
+def deviation(series: Iterable[Array], factors: Sequence[int],
+              width: int) -> tuple[Array, Array]:
+    """(overlapping Allan deviation (factors, width) of the (N, width) rate series pooled,
+    terms per factor): with the phase x = cumsum(y) (a leading 0), sigma^2(m) =
+    sum (x[i+2m] - 2 x[i+m] + x[i])^2 / (2 m^2 terms); NaN with no terms."""
+    sums, terms = np.zeros((len(factors), width)), np.zeros(len(factors))
+    for y in series:
+        x = np.vstack([np.zeros((1, width)), np.cumsum(y, axis=0)])
+        for i, m in enumerate(factors):
+            if y.shape[0] >= 2 * m + 1:
+                d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
+                sums[i] += (d * d).sum(axis=0)
+                terms[i] += d.shape[0]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        adev = np.sqrt(sums / (2.0 * np.square(factors)[:, None] * terms[:, None]))
+    return adev, terms
 
 
 def taus(longest: int) -> list[int]:
@@ -49,23 +45,14 @@ def profile(rec: Recording, factors: Sequence[int] | None = None) -> dict[str, A
     recording's run residuals, pooled over runs (stationary recordings only)."""
     used = list(rec.channels_used)
     runs = [r for r in run_indices(rec) if r.size >= 3]
-    longest = max((r.size for r in runs), default=0)
-    factors = list(factors) if factors is not None else taus(longest)
-    sums = np.zeros((len(factors), len(used) + 1))
-    terms = np.zeros(len(factors))
-    for r in runs:
+    factors = list(factors) if factors is not None else \
+        taus(max((r.size for r in runs), default=0))
+
+    def residuals(r: np.ndarray) -> Array:
         y = rec.readings[r][:, used].astype(np.float64)
         y = y - y.mean(axis=0)
-        cols = np.concatenate([y, y.mean(axis=1, keepdims=True)], axis=1)
-        for i, m in enumerate(factors):
-            if r.size < 2 * m + 1:
-                continue
-            x = np.vstack([np.zeros((1, cols.shape[1])), np.cumsum(cols, axis=0)])
-            d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
-            sums[i] += (d * d).sum(axis=0)
-            terms[i] += d.shape[0]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        adev = np.sqrt(sums / (2.0 * np.square(factors)[:, None] * terms[:, None]))
+        return np.concatenate([y, y.mean(axis=1, keepdims=True)], axis=1)
+    adev, terms = deviation(map(residuals, runs), factors, len(used) + 1)
     return {'taus': factors, 'terms': terms.tolist(),
             'sensors': {int(s): adev[:, k].tolist() for k, s in enumerate(used)},
             'shared': adev[:, -1].tolist()}

@@ -2,6 +2,7 @@
 turn responses and scatter, and the noise while turning in three views (docs/diagnosis.md)."""
 from __future__ import annotations
 
+import functools
 from typing import Callable
 
 import numpy as np
@@ -36,9 +37,7 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     heading = rec.heading_deg[order]
     tracked = bool(np.isfinite(heading).all())
     phase = (steps % perturb_every)[:, None] == np.arange(perturb_every)[None, :]
-
-    def by(values: Array) -> Array:
-        return _by(ep, values, m)
+    by = functools.partial(sum_by, ep, episodes=m)
     factors = np.stack(fitness_factors(r, rec.power[order]), axis=1).astype(np.float64)
     parts = {'n': by(np.ones((len(r), 1))), 'level': by(r),
              'factor': by(factors[:, :, None] * phase[:, None, :]), 'phase_n': by(phase * 1.0),
@@ -54,26 +53,27 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     dy = imbalance[ok + 1] - imbalance[ok]
     e = ep[ok]
     parts['xtx'] = _gram(e, xr, xr, m)
-    parts['xty'] = _by(e, xr * dy[:, None], m)
+    parts['xty'] = sum_by(e, xr * dy[:, None], m)
     parts['xty_sensor'] = _gram(e, xr, dr, m)
     design = np.concatenate([u[ok, None], u[ok - 1, None], np.ones((ok.size, 1)), r[ok],
                              u[ok, None] * r[ok] / 100.0], axis=1)
     w = _bands(u[ok])
-    parts['scatter_n'] = _by(e, w, m)
+    parts['scatter_n'] = sum_by(e, w, m)
     inside = w.any(axis=1)             # each row in its band's group only
     band = e[inside] * w.shape[1] + w[inside].argmax(axis=1)
     shape = (m, w.shape[1], design.shape[1])
-    parts['scatter_xx'] = _gram(band, design[inside], design[inside], shape[0] * shape[1]) \
+    parts['scatter_xx'] = _gram(band, design[inside], design[inside], m * w.shape[1]) \
         .reshape(shape + design.shape[1:])
-    parts['scatter_xy'] = _gram(band, design[inside], dr[inside], shape[0] * shape[1]) \
+    parts['scatter_xy'] = _gram(band, design[inside], dr[inside], m * w.shape[1]) \
         .reshape(shape + dr.shape[1:])
-    parts['scatter_yy'] = _by(e, w * (dr * dr).sum(axis=1)[:, None], m)
+    parts['scatter_yy'] = sum_by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
         t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
-        dh = (heading[t + 1] - heading[t] + 180.0) % 360.0 - 180.0
+        dh = wrap(heading[t + 1] - heading[t])
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
-        parts['heading_band'] = _by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
-    parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every, loop_only))
+        parts['heading_band'] = sum_by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
+    parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every,
+                              loop_only, tracked))
     parts.update(more(order, ep, m))          # the converter's sums
     conditions = rec.conditions()
     first = rec.condition[order][np.r_[0, np.flatnonzero(np.diff(ep)) + 1]]
@@ -83,9 +83,8 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
                             {'perturb_every': perturb_every, 'heading': tracked})
 
 
-def _by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep`` (one sparse product; its
-    rows straight from ``ep`` where that is in order, as it is in episode order)."""
+def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
+    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep``, in one sparse product."""
     n = ep.size
     if n and np.all(ep[1:] >= ep[:-1]):
         indptr = np.searchsorted(ep, np.arange(episodes + 1))
@@ -96,9 +95,15 @@ def _by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
     return out.reshape((episodes,) + values.shape[1:])
 
 
+def wrap(deg: Array) -> Array:
+    """Angles in degrees wrapped to [-180, 180)."""
+    out: Array = (deg + 180.0) % 360.0 - 180.0
+    return out
+
+
 def _gram(group: np.ndarray, a: Array, b: Array, groups: int) -> Array:
-    """(groups, ka, kb) sums of the outer products of the rows of ``a`` and ``b`` by group:
-    one matrix product per group, never the (N, ka, kb) products themselves."""
+    """(groups, ka, kb) sums of the outer products of the rows of ``a`` and ``b`` by group,
+    one matrix product per group (never the (N, ka, kb) products)."""
     if group.size and not np.all(group[1:] >= group[:-1]):
         order = np.argsort(group, kind='stable')
         group, a, b = group[order], a[order], b[order]
@@ -117,22 +122,20 @@ def _bands(u: Array) -> Array:
 
 
 def _noise_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, steps: np.ndarray,
-                 pair: np.ndarray, r: Array, perturb_every: int,
-                 loop_only: bool) -> dict[str, Array]:
+                 pair: np.ndarray, r: Array, perturb_every: int, loop_only: bool,
+                 tracked: bool) -> dict[str, Array]:
     power = np.nan_to_num(rec.power[order], nan=1.0)
     still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
     d, level = np.zeros_like(r), np.zeros_like(r)
     d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
     parts = _view('still', d, _onehot(level, still), still,
                   still & np.r_[False, still[:-1]], ep, m, 0.5)  # var(d) = 2 var(noise)
-    heading = rec.heading_deg[order]
-    tracked = bool(np.isfinite(heading).all())
     # the change view stands in for the residual view on a robot nobody tracked; a
     # simulated side always knows its headings: it gives both, the real side chooses
     if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
         parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
     if tracked:
-        e, use, _ = residuals(r, heading, rec.condition[order], pair, m)
+        e, use, _ = residuals(r, rec.heading_deg[order], rec.condition[order], pair, m)
         parts.update(_view('res', e, None, use, use & pair & np.r_[False, use[:-1]], ep, m, 1.0))
     return parts
 
@@ -145,18 +148,18 @@ def _onehot(level: Array, use: np.ndarray) -> Array:
 
 def _view(name: str, x: Array, onehot: Array | None, use: np.ndarray, lagged: np.ndarray,
           ep: np.ndarray, m: int, scale: float) -> dict[str, Array]:
-    """Per-episode count, cross products, per-band counts and squares (by each sensor's own
-    level), and lag-1 products (``lagged``: t whose t - 1 is used too) of ``x``."""
+    """Per-episode count, cross products, per-band counts and squares, and lag-1 products
+    (``lagged``: t whose t - 1 is used too) of ``x``."""
     xs = x * use[:, None]
     lag = np.zeros_like(x)
     lag[1:] = x[1:] * x[:-1]
-    out = {f'{name}_n': _by(ep, use[:, None] * 1.0, m),
+    out = {f'{name}_n': sum_by(ep, use[:, None] * 1.0, m),
            f'{name}_s2': scale * _gram(ep, xs, xs, m),
-           f'{name}_lag_n': _by(ep, lagged[:, None] * 1.0, m),
-           f'{name}_lag_s': scale * _by(ep, lag * lagged[:, None], m)}
+           f'{name}_lag_n': sum_by(ep, lagged[:, None] * 1.0, m),
+           f'{name}_lag_s': scale * sum_by(ep, lag * lagged[:, None], m)}
     if onehot is not None:
-        out[f'{name}_band_n'] = _by(ep, onehot * 1.0, m)
-        out[f'{name}_band_s2'] = scale * _by(ep, onehot * (xs * xs)[:, None, :], m)
+        out[f'{name}_band_n'] = sum_by(ep, onehot * 1.0, m)
+        out[f'{name}_band_s2'] = scale * sum_by(ep, onehot * (xs * xs)[:, None, :], m)
     return out
 
 
@@ -190,12 +193,13 @@ def _change_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, ste
     lag = np.zeros_like(e)
     lag[1:] = e[1:] * e[:-1]
     onehot = _onehot(r, use)
-    return {'chg_band_n': _by(ep, onehot * 1.0, m),
-            'chg_band_s2': 0.5 * _by(ep, onehot * (e * e)[:, None, :], m),
-            'chg_q_n': _by(ep, both * 1.0, m),
+    return {'chg_band_n': sum_by(ep, onehot * 1.0, m),
+            'chg_band_s2': 0.5 * sum_by(ep, onehot * (e * e)[:, None, :], m),
+            'chg_q_n': sum_by(ep, both * 1.0, m),
             'chg_q_xy': 0.5 * _gram(ep, eq, eq, m),
-            'chg_q_xx': 0.5 * _by(ep, (eq * eq)[:, :, None] * both, m),
-            'chg_lag_n': _by(ep, lagged * 1.0, m), 'chg_lag_s': 0.5 * _by(ep, lag * lagged, m)}
+            'chg_q_xx': 0.5 * sum_by(ep, (eq * eq)[:, :, None] * both, m),
+            'chg_lag_n': sum_by(ep, lagged * 1.0, m),
+            'chg_lag_s': 0.5 * sum_by(ep, lag * lagged, m)}
 
 
 # -- the residual view's delays --------------------------------------------------------------
@@ -282,127 +286,100 @@ def delayed_sensors(recordings: list[Recording]) -> tuple[int, ...]:
 # -- statistics ------------------------------------------------------------------------------
 
 Part = Callable[[bootstrap.Blocks, Array, int, str], tuple[list[Key], list[Array]]]
+Columns = list[tuple[Key, Array]]
+LEVELS = tuple(f'level {lo:g}-{hi:g}' for lo, hi in zip(BANDS, BANDS[1:] + (525.0,)))
+PAIRS = tuple((k, m) for k in range(8) for m in range(k + 1, 8))
 
 
 def stats(b: bootstrap.Blocks, s: Array, more: Part) -> tuple[list[Key], list[Array]]:
-    """(keys, (R,) columns) from the resampled (R, S, D) per-episode sums; ``more``: the
-    converter's statistics of each stratum."""
+    """(keys, columns) from the resampled (R, S, D) per-episode sums; ``more``: the
+    converter's statistics of each stratum (its columns may be (R, k) blocks)."""
     keys: list[Key] = []
     cols: list[Array] = []
     n = b.part(s, 'n')[..., 0]
-    phases = b.extra['perturb_every']
     front = (0, 1, 2, 3, 4, 5)
+    lags = ('lag 0', 'lag 1')
     for i, c in enumerate(b.strata):
         level = b.part(s, 'level')[:, i] / n[:, i, None]
-        keys += [Key('closed_loop_level', (k,), c, None) for k in range(8)]
-        cols += list(level.T)
+        out: Columns = [(Key('closed_loop_level', (k,), c, None), level[:, k]) for k in range(8)]
         factor, count = b.part(s, 'factor')[:, i], b.part(s, 'phase_n')[:, i]
         power = b.part(s, 'power')[:, i] / count
-        for p in range(phases):
+        for p in range(b.extra['perturb_every']):
             part = f'step {p} after perturbation'
-            for f, name in enumerate(FACTORS):
-                keys.append(Key(f'fitness_{name}', front, c, part))
-                cols.append(factor[:, f, p] / count[:, p])
-            keys.append(Key('turn_power', (), c, part))
-            cols.append(power[:, p])
-        keys.append(Key('turn_right_fraction', (), c, None))
-        cols.append(b.part(s, 'right')[:, i, 0] / n[:, i])
+            out += [(Key(f'fitness_{name}', front, c, part), factor[:, f, p] / count[:, p])
+                    for f, name in enumerate(FACTORS)]
+            out.append((Key('turn_power', (), c, part), power[:, p]))
+        right = b.part(s, 'right')[:, i, 0] / n[:, i]
+        out.append((Key('turn_right_fraction', (), c, None), right))
         xtx = b.part(s, 'xtx')[:, i]
         beta = _solve(xtx, b.part(s, 'xty')[:, i][..., None])[..., 0]
         beta_s = _solve(xtx, b.part(s, 'xty_sensor')[:, i])
-        for j, lag in enumerate(('lag 0', 'lag 1')):
-            keys.append(Key('turn_response', front, c, lag))
-            cols.append(beta[:, j])
-        for k in range(8):
-            for j, lag in enumerate(('lag 0', 'lag 1')):
-                keys.append(Key('sensor_turn_response', (k,), c, lag))
-                cols.append(beta_s[:, j, k])
+        out += [(Key('turn_response', front, c, lag), beta[:, j]) for j, lag in enumerate(lags)]
+        out += [(Key('sensor_turn_response', (k,), c, lag), beta_s[:, j, k])
+                for k in range(8) for j, lag in enumerate(lags)]
         if b.extra['heading']:
             h = b.part(s, 'heading_band')[:, i].sum(axis=1)
-            keys.append(Key('turn_size', (), c, 'deg per unit of command'))
-            cols.append(h[:, 2] / h[:, 1])
-        for stat in (_noise_stats, _scatter_stats, more):
-            k_, c_ = stat(b, s, i, c)
-            keys += k_
-            cols += c_
+            out.append((Key('turn_size', (), c, 'deg per unit of command'), h[:, 2] / h[:, 1]))
+        out += _noise_stats(b, s, i, c) + _change_stats(b, s, i, c) + _scatter_stats(b, s, i, c)
+        more_keys, more_cols = more(b, s, i, c)
+        keys += [k for k, _ in out] + more_keys
+        cols += [v for _, v in out] + more_cols
     return keys, cols
 
 
-def _noise_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], list[Array]]:
-    keys: list[Key] = []
-    cols: list[Array] = []
+def _noise_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> Columns:
+    out: Columns = []
     views = [('still', 'still', 'lag 1 of differences')]
     if b.has('res_n'):
         views.append(('residual', 'res', 'lag 1'))
     for view, name, lag_part in views:
         n = b.part(s, f'{name}_n')[:, i, 0]
-        if n[0] < 8:                                   # too few samples to say anything
+        if n[0] < MIN_ROWS:
             continue
         cov = b.part(s, f'{name}_s2')[:, i] / n[:, None, None]
         var = np.diagonal(cov, axis1=-2, axis2=-1)
         if name == 'still':
             band_n = b.part(s, 'still_band_n')[:, i]
             spread = np.sqrt(b.part(s, 'still_band_s2')[:, i] / band_n)
-            bands = [(f'level {lo:g}-{hi:g}', band_n[:, j], spread[:, j])
-                     for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,)))]
+            bands = [(label, band_n[:, j], spread[:, j]) for j, label in enumerate(LEVELS)]
         else:      # one spread per sensor: where the light is steep a band is not noise alone
             bands = [('level 0-525', np.repeat(n[:, None], 8, axis=1), np.sqrt(var))]
-        for part, count, spread in bands:
-            for k in range(8):
-                if count[0, k] >= 8:
-                    keys.append(Key(f'loop_{view}_spread', (k,), c, part))
-                    cols.append(spread[:, k])
+        out += [(Key(f'loop_{view}_spread', (k,), c, part), sd[:, k])
+                for part, count, sd in bands for k in range(8) if count[0, k] >= MIN_ROWS]
         sd = np.sqrt(var)
         corr = cov / (sd[:, :, None] * sd[:, None, :])
-        for k in range(8):
-            for m in range(k + 1, 8):
-                keys.append(Key(f'loop_{view}_correlation', (k, m), c, None))
-                cols.append(corr[:, k, m])
+        out += [(Key(f'loop_{view}_correlation', pair, c, None), corr[:, pair[0], pair[1]])
+                for pair in PAIRS]
         lag_n = b.part(s, f'{name}_lag_n')[:, i, 0]
-        if lag_n[0] >= 8:
+        if lag_n[0] >= MIN_ROWS:
             lag = b.part(s, f'{name}_lag_s')[:, i] / lag_n[:, None] / var
-            keys += [Key(f'loop_{view}_autocorrelation', (k,), c, lag_part) for k in range(8)]
-            cols += list(lag.T)
-    if b.has('chg_band_n'):
-        k_, c_ = _change_stats(b, s, i, c)
-        keys, cols = keys + k_, cols + c_
-    return keys, cols
+            out += [(Key(f'loop_{view}_autocorrelation', (k,), c, lag_part), lag[:, k])
+                    for k in range(8)]
+    return out
 
 
-def _change_stats(b: bootstrap.Blocks, s: Array, i: int,
-                  c: str) -> tuple[list[Key], list[Array]]:
-    keys, cols = [], []
-    band_n = b.part(s, 'chg_band_n')[:, i]
+def _change_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> Columns:
+    if not b.has('chg_band_n'):
+        return []
+    band_n, q_n = b.part(s, 'chg_band_n')[:, i], b.part(s, 'chg_q_n')[:, i]
+    xx, lag_n = b.part(s, 'chg_q_xx')[:, i], b.part(s, 'chg_lag_n')[:, i]
     with np.errstate(divide='ignore', invalid='ignore'):
         spread = np.sqrt(b.part(s, 'chg_band_s2')[:, i] / band_n)
-        for j, (lo, hi) in enumerate(zip(BANDS, BANDS[1:] + (525.0,))):
-            for k in range(8):
-                if band_n[0, j, k] >= MIN_ROWS:
-                    keys.append(Key('loop_change_spread', (k,), c, f'level {lo:g}-{hi:g}'))
-                    cols.append(spread[:, j, k])
-        q_n, xx = b.part(s, 'chg_q_n')[:, i], b.part(s, 'chg_q_xx')[:, i]
         corr = b.part(s, 'chg_q_xy')[:, i] / np.sqrt(xx * np.swapaxes(xx, 1, 2))
-        for k in range(8):
-            for m in range(k + 1, 8):
-                if q_n[0, k, m] >= MIN_ROWS:
-                    keys.append(Key('loop_change_correlation', (k, m), c, QUIET_PART))
-                    cols.append(corr[:, k, m])
-        lag_n = b.part(s, 'chg_lag_n')[:, i]
         var = np.diagonal(xx, axis1=-2, axis2=-1) / np.diagonal(q_n, axis1=-2, axis2=-1)
         lag = b.part(s, 'chg_lag_s')[:, i] / lag_n / var
-        for k in range(8):
-            if lag_n[0, k] >= MIN_ROWS:
-                keys.append(Key('loop_change_autocorrelation', (k,), c, QUIET_PART))
-                cols.append(lag[:, k])
-    return keys, cols
+    return [(Key('loop_change_spread', (k,), c, label), spread[:, j, k])
+            for j, label in enumerate(LEVELS) for k in range(8) if band_n[0, j, k] >= MIN_ROWS] \
+        + [(Key('loop_change_correlation', (k, m), c, QUIET_PART), corr[:, k, m])
+           for k, m in PAIRS if q_n[0, k, m] >= MIN_ROWS] \
+        + [(Key('loop_change_autocorrelation', (k,), c, QUIET_PART), lag[:, k])
+           for k in range(8) if lag_n[0, k] >= MIN_ROWS]
 
 
-def _scatter_stats(b: bootstrap.Blocks, s: Array, i: int,
-                   c: str) -> tuple[list[Key], list[Array]]:
+def _scatter_stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> Columns:
     """``turn_scatter``: per power band the readings' change about the pooled regression
     (rms over sensors); with headings ``turn_size_scatter``: the turn about the pooled
     turn per unit of command."""
-    keys, cols = [], []
     n, xx = b.part(s, 'scatter_n')[:, i], b.part(s, 'scatter_xx')[:, i]
     xy, yy = b.part(s, 'scatter_xy')[:, i], b.part(s, 'scatter_yy')[:, i]
     with np.errstate(invalid='ignore'):
@@ -410,17 +387,16 @@ def _scatter_stats(b: bootstrap.Blocks, s: Array, i: int,
     rss = yy - 2 * np.einsum('rbik,rik->rb', xy, beta) \
         + np.einsum('rik,rbij,rjk->rb', beta, xx, beta)
     labels = [f'power {lo}' if lo == hi else f'power {lo}-{hi}' for lo, hi in POWER_BANDS]
-    for j, label in enumerate(labels):
-        keys.append(Key('turn_scatter', tuple(range(8)), c, label))
-        cols.append(_rms(rss[:, j], n[:, j] * 8))
+    out = [(Key('turn_scatter', tuple(range(8)), c, label), _rms(rss[:, j], n[:, j] * 8))
+           for j, label in enumerate(labels)]
     if b.extra['heading']:
         h = b.part(s, 'heading_band')[:, i]
         total = h.sum(axis=1)
         k = total[:, 2] / total[:, 1]
-        for j, label in enumerate(labels):
-            keys.append(Key('turn_size_scatter', (), c, label))
-            cols.append(_rms(h[:, j, 3] - 2 * k * h[:, j, 2] + k * k * h[:, j, 1], h[:, j, 0]))
-    return keys, cols
+        out += [(Key('turn_size_scatter', (), c, label),
+                 _rms(h[:, j, 3] - 2 * k * h[:, j, 2] + k * k * h[:, j, 1], h[:, j, 0]))
+                for j, label in enumerate(labels)]
+    return out
 
 
 def _rms(rss: Array, n: Array) -> Array:

@@ -6,7 +6,7 @@ import copy
 import functools
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -106,14 +106,18 @@ class Comparison:
         """Each part's statistics (parts with none left out)."""
         return {p: self.part(p) for p in PARTS if (self.parts == p).any()}
 
-    def of(self, wanted: Callable[[str], bool]) -> 'Comparison':
-        """The statistics whose family is ``wanted``."""
-        return self.select([wanted(k.family) for k in self.keys])
+    def of(self, family: str) -> 'Comparison':
+        return self.select([k.family == family for k in self.keys])
 
 
 def discrepancy(z: Array, margin: float = MARGIN) -> float:
     """sum of max(|z| - margin, 0)^2; margin 0 gives the plain sum of squares."""
     return float((np.clip(np.abs(z) - margin, 0.0, None) ** 2).sum())
+
+
+def reduction(before: float, after: float) -> float:
+    """The share of the discrepancy ``before`` that ``after`` removes (0 with none before)."""
+    return 1.0 - after / before if before > 0 else 0.0
 
 
 def chance(n: int) -> float:

@@ -14,11 +14,11 @@ from ..effects.base import Array, Candidate
 from ..effects.fitting import ALPHA
 from ..recording import Recording
 from . import allan, bootstrap, split
-from .compare import Comparison, entries, localise, paired_p
+from .compare import Comparison, entries, localise, paired_p, reduction
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
 from .select import (FINGERPRINT_REPLICATES, MIN_ADDED, MIN_REDUCTION, STEP_ALPHA, Compound,
-                     Selection, as_good, fit_one, free, loop_worse)
+                     Selection, as_good, fit_one, loop_worse, simpler)
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -55,11 +55,10 @@ class World:
     notes: dict[str, str] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        return {'effects': [{'name': e.name, 'sensors': list(e.sensors),
-                             'parameters': e.parameters()} for e in self.effects],
-                'discrepancy_before': self.before, 'discrepancy_after': self.after,
-                'heldout_reduction': 1.0 - self.after / self.before if self.before > 0 else 0.0,
-                'p_value': self.p_value, 'notes': self.notes}
+        return {**_summary(self.effects, self.before, self.after), 'p_value': self.p_value,
+                'notes': self.notes, 'effects': [{'name': e.name, 'sensors': list(e.sensors),
+                                                  'parameters': e.parameters()}
+                                                 for e in self.effects]}
 
 
 @dataclass
@@ -86,8 +85,7 @@ class Diagnosis:
 
     @property
     def fitted_effects(self) -> list[Effect]:
-        """What fitted_params.yaml loads: the world identified, then the compound set (else
-        the top effect)."""
+        """What fitted_params.yaml loads: the world identified, then the named effects."""
         return ([] if self.world is None else list(self.world.effects)) + self.named_effects
 
     @property
@@ -120,17 +118,8 @@ Scored = tuple[dict[str, Any], Comparison | None, Effect | None, Array | None]
 
 def diagnose(recordings: Sequence[Recording], options: Options = Options(),
              log: Callable[[str], None] | None = None) -> Diagnosis:
-    """Diagnose the gap between ``recordings`` (one robot: stationary, closed-loop or both)
-    and the simulator of ``options.config``.
-
-    Returns:
-        The ``Diagnosis``: where the gap lies, every candidate effect alone (ranked), the
-        top effect, the compound set, the remainder with its empirical model, the Allan
-        profiles and notes; ``to_json()`` gives diagnosis.json.
-
-    Raises:
-        ValueError: bad recordings or options (see ``check``), with a one-line message.
-    """
+    """The gap between ``recordings`` (one robot: stationary, closed-loop or both) and the
+    simulator of ``options.config``; ValueError (one line) on bad recordings or options."""
     check(recordings)
     o = options
     unknown = [n for n in o.effects if n not in DEFAULT]
@@ -158,8 +147,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
     parts: dict[str, str] = {}
-    world = _world(a, b, b.compare(), o.effects, log, parts) \
-        if significant else None
+    world = _world(a, b, b.compare(), o.effects, log, parts) if significant else None
     if world is None and parts:     # never silent about a part its protocol would identify
         notes.append('the world model is the simulator\'s own: ' + '; '.join(
             f'{name}: {note}' for name, note in parts.items()))
@@ -217,16 +205,12 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
 
 
 def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
-           log: Callable[[str], None] | None = None,
-           notes: dict[str, str] | None = None) -> World | None:
-    """The simulator's world identified before its noise: the world model's parts among
-    ``names`` fitted on ``a`` in order, each given those before it (the light shapes what
-    a sensor follows, and both what a turn shows), then dropped while dropping one lowers
-    the held-out discrepancy on ``b``; kept when the set lowers it significantly from
-    ``before`` (the stock simulator's). ``notes`` gets each part's note (what it found, or
-    the protocol it lacks)."""
+           log: Callable[[str], None] | None, notes: dict[str, str]) -> World | None:
+    """The world model's parts among ``names`` fitted on ``a`` in order, each given those
+    before it (the light shapes what a sensor follows, and both what a turn shows), then
+    dropped while that lowers the held-out discrepancy on ``b``; kept if the set lowers it
+    significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
-    notes = {} if notes is None else notes
     for part in (n for n in WORLD_MODEL if n in names):
         given = a.with_given(fitted)
         cand = fit_one(part, given, given.compare(replicates=FINGERPRINT_REPLICATES))
@@ -268,18 +252,18 @@ def _compound(result: Diagnosis, a: Target, b: Target,
             result.rounding['rounding'] == result.rounding['given']:
         a, b = _late_rounding(result, a, b, o)
     result.held_out_after = c.comparison
-    result.combined = {'effects': [e.name for e in c.effects],
-                       'discrepancy_before': before.discrepancy,
-                       'discrepancy_after': c.discrepancy_after,
-                       'heldout_reduction': c.reduction}
+    result.combined = _summary(c.effects, before.discrepancy, c.discrepancy_after)
     return a, b
+
+
+def _summary(effects: Sequence[Effect], before: float, after: float) -> dict[str, Any]:
+    return {'effects': [e.name for e in effects], 'discrepancy_before': before,
+            'discrepancy_after': after, 'heldout_reduction': reduction(before, after)}
 
 
 def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array,
            base: Comparison) -> Scored:
-    """(effects entry, held-out comparison, effect, replicate discrepancies after); an
-    effect that predicts the held-out closed loop worse than ``base`` says so and ranks
-    after every other (``select.loop_worse``)."""
+    """(effects entry, held-out comparison, effect, replicate discrepancies after)."""
     entry = {'name': cand.name, 'sensors': [], 'parameters': {},
              'discrepancy_before': d_before, 'discrepancy_after': d_before,
              'heldout_reduction': 0.0, 'reduction_interval': [0.0, 0.0], 'p_value': 1.0,
@@ -292,12 +276,12 @@ def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array,
         entry['note'] = f'{cand.note}; cannot be scored: {type(exc).__name__}: {exc}'
         return entry, None, None, None
     after_reps = b.replicate_discrepancies(after)
-    reduction = 1.0 - after.discrepancy / d_before
+    share = reduction(d_before, after.discrepancy)
     # resampling biases the replicates' reduction down: shifted to the estimate's median
     reps = 1.0 - after_reps / np.maximum(before_reps, 1e-9)
-    reps += reduction - np.median(reps)
+    reps += share - np.median(reps)
     entry.update({'sensors': list(cand.effect.sensors), 'parameters': cand.effect.parameters(),
-                  'discrepancy_after': after.discrepancy, 'heldout_reduction': reduction,
+                  'discrepancy_after': after.discrepancy, 'heldout_reduction': share,
                   'reduction_interval': [float(np.quantile(reps, 0.025)),
                                          float(np.quantile(reps, 0.975))],
                   'p_value': float((np.sum(reps <= 0) + 1) / (reps.size + 1))})
@@ -314,14 +298,14 @@ def _parsimonious(scored: list[Scored], alpha: float) -> list[Scored]:
     if len(scored) < 2 or scored[0][3] is None:
         return scored
     best, best_reps = scored[0], scored[0][3]
-    rivals = [s for s in scored[1:] if s[3] is not None and s[0]['heldout_reduction'] > 0
-              and not s[0].get('closed_loop_worse')
-              and free(s[0]['name']) < free(best[0]['name'])
-              and as_good(best[0]['discrepancy_after'], best_reps, s[0]['discrepancy_after'],
-                          s[3], alpha)]
-    if not rivals:
+    simplest = next((s for s in simpler(scored[1:], best[0]['name'], lambda s: s[0]['name'],
+                                        lambda s: -s[0]['heldout_reduction'])
+                     if s[3] is not None and s[0]['heldout_reduction'] > 0
+                     and not s[0].get('closed_loop_worse')
+                     and as_good(best[0]['discrepancy_after'], best_reps,
+                                 s[0]['discrepancy_after'], s[3], alpha)), None)
+    if simplest is None:
         return scored
-    simplest = min(rivals, key=lambda s: (free(s[0]['name']), -s[0]['heldout_reduction']))
     simplest[0]['note'] += (f'; ranked first: explains the held-out data as well as '
                             f'{best[0]["name"]} with fewer parameters')
     return [simplest] + [s for s in scored if s is not simplest]
@@ -334,9 +318,7 @@ def _combined(b: Target, scored: list[Scored], d_before: float,
             scored[1][0]['heldout_reduction'] < o.min_reduction or scored[0][2] is None:
         return None
     pair = [scored[0][2], scored[1][2]]
-    after = b.compare(pair).discrepancy
-    return {'effects': [e.name for e in pair], 'discrepancy_before': d_before,
-            'discrepancy_after': after, 'heldout_reduction': 1.0 - after / d_before}
+    return _summary(pair, d_before, b.compare(pair).discrepancy)
 
 
 # -- where the simulator rounds ---------------------------------------------------------
@@ -347,18 +329,18 @@ def with_rounding(config: SimConfig, rounding: str) -> SimConfig:
 
 def _lattice(t: Target, c: Comparison) -> tuple[float, Array]:
     """(the lattice statistics' part of ``c``'s discrepancy, the same per real replicate)."""
-    mask = np.array([k.family in having('lattice') for k in c.keys], bool)
-    if not mask.any():
+    part = c.select([k.family in having('lattice') for k in c.keys])
+    if not part.keys:
         return 0.0, np.zeros(max(t.real.values.shape[0] - 1, 1))
-    return c.select(mask).discrepancy, t.replicate_discrepancies(c.select(mask))
+    return part.discrepancy, t.replicate_discrepancies(part)
 
 
 def _rounding(result: Diagnosis, a: Target, b: Target, given: list[Effect],
               known: Comparison | None, o: Options) -> tuple[Target, Target, Comparison | None]:
-    """The rounding the fitting part's value lattice prefers with ``given`` in the simulator:
-    the other only if it lowers the lattice statistics' discrepancy by ``LATTICE_SHARE``
-    in ``1 - alpha`` of the paired replicates, and on the held-out part too.  Returns
-    (a, b, the held-out comparison with ``given``) under the rounding chosen."""
+    """(a, b, the held-out comparison with ``given`` if switched) under the rounding the
+    value lattice prefers with ``given`` in the simulator: the other only if it lowers the
+    lattice statistics' discrepancy by ``LATTICE_SHARE`` (paired p < ``reduction_alpha``)
+    on the fitting part and lowers it on the held-out part too."""
     here = a.config.noise.rounding
     other = next(r for r in ROUNDINGS if r != here)
     d0, reps0 = _lattice(a, a.compare(given, replicates=LATTICE_REPLICATES))
@@ -394,8 +376,7 @@ def _rounding(result: Diagnosis, a: Target, b: Target, given: list[Effect],
 
 def _late_rounding(result: Diagnosis, a: Target, b: Target, o: Options) -> tuple[Target, Target]:
     """The rounding asked again given the whole compound (a stand-in chosen first can leave
-    the spreads too far off for the lattice to tell), kept only if the chosen effects'
-    held-out discrepancy falls under it."""
+    the spreads too far off for the lattice to tell), kept if the compound does better."""
     assert result.compound is not None and result.rounding is not None
     early = {k: result.rounding[k] for k in ('rounding', 'lattice', 'p_value')}
     c = result.compound
@@ -432,7 +413,7 @@ def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Opti
         'share_of_gap_left': after.discrepancy / d_before if d_before > 0 else 0.0,
         'where': [e for e in entries(after, 10, o.alpha) if e['significant']],
         'localisation': localise(after, o.alpha), 'named_effects': [e.name for e in named],
-        'heldout_reduction_named': 1.0 - after.discrepancy / d_before if d_before > 0 else 0.0}
+        'heldout_reduction_named': reduction(d_before, after.discrepancy)}
     try:
         empirical = EmpiricalNoise.fit(a.with_given(named).evidence(None)).effect
         with_empirical = b.compare(named + [empirical]) if empirical is not None else None
@@ -441,8 +422,7 @@ def _remainder(result: Diagnosis, a: Target, b: Target, d_before: float, o: Opti
         out['note'] = f'the empirical model could not be fitted: {type(exc).__name__}: {exc}'
     if empirical is not None and with_empirical is not None:
         out['empirical'] = empirical.to_dict()
-        out['heldout_reduction_with_empirical'] = 1.0 - with_empirical.discrepancy / d_before \
-            if d_before > 0 else 0.0
+        out['heldout_reduction_with_empirical'] = reduction(d_before, with_empirical.discrepancy)
         if with_empirical.discrepancy < after.discrepancy:
             result.empirical = empirical
     result.remainder = out

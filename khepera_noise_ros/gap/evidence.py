@@ -14,6 +14,7 @@ from .protocol import runs
 from .stationary import own_part
 
 Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
+Parts = list[tuple[Array, ...]]       # own_parts of several recordings
 WINDOW = 8                    # samples averaged into one value of the slow part
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
                 'loop_change_correlation')
@@ -25,25 +26,33 @@ CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
 
 # -- groups ----------------------------------------------------------------------------
 
-def part_sums(rec: Recording, part: str) -> dict[str, list[Any]]:
+def part_sums(recs: Sequence[Recording], part: str) -> dict[str, list[Any]]:
     """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
-    residuals."""
-    used = list(rec.channels_used)
+    residuals, pooled over ``recs``."""
     out: dict[str, list[Any]] = {}
-    for r in runs(rec):
-        y = rec.readings[r][:, used].astype(np.float64)
-        if part == 'fast':
-            d = np.diff(y, axis=0)
-        else:
-            k = y.shape[0] // WINDOW
-            d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
-        if d.shape[0] < 2:
-            continue
-        d = d - d.mean(axis=0) if part == 'fast' else d
-        acc = out.setdefault(str(rec.condition[r[0]]), [0.0, 0])
-        acc[0] = acc[0] + d.T @ d
-        acc[1] += d.shape[0]
+    for rec in recs:
+        mine: dict[str, list[Any]] = {}
+        for r in runs(rec):
+            y = rec.readings[r][:, list(rec.channels_used)].astype(np.float64)
+            if part == 'fast':
+                d = np.diff(y, axis=0)
+            else:
+                k = y.shape[0] // WINDOW
+                d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
+            if d.shape[0] < 2:
+                continue
+            d = d - d.mean(axis=0) if part == 'fast' else d
+            _add(mine, str(rec.condition[r[0]]), d.T @ d, d.shape[0])
+        for cond, (s, n) in mine.items():
+            _add(out, cond, s, n)
     return out
+
+
+def _add(sums: dict[Any, list[Any]], cell: Any, s: Array, n: int) -> None:
+    """Adds sums ``s`` of ``n`` rows to ``sums[cell]`` ([sum, count])."""
+    acc = sums.setdefault(cell, [0.0, 0])
+    acc[0] = acc[0] + s
+    acc[1] += n
 
 
 def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
@@ -51,7 +60,7 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
     """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
     conditions (0 on the diagonal)."""
     zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))
-    pooled = [_pool([part_sums(r, part) for r in recs]) for recs in (real, sim)]
+    pooled = [part_sums(recs, part) for recs in (real, sim)]
     for cond, (sr, nr) in pooled[0].items():
         if cond not in pooled[1] or nr < 8:
             continue
@@ -63,19 +72,8 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
         ok = np.isfinite(z)
         zsum += np.where(ok, z, 0.0)
         count += ok
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    out = _stouffer(zsum, count)
     np.fill_diagonal(out, 0.0)
-    return out
-
-
-def _pool(parts: list[dict[str, list[Any]]]) -> dict[str, list[Any]]:
-    out: dict[str, list[Any]] = {}
-    for p in parts:
-        for cond, (s, n) in p.items():
-            acc = out.setdefault(cond, [0.0, 0])
-            acc[0] = acc[0] + s
-            acc[1] += n
     return out
 
 
@@ -85,20 +83,23 @@ def _corr(s: Array) -> Array:
     return out
 
 
+def _stouffer(zsum: Array, count: Array) -> Array:
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out: Array = np.where(count > 0, zsum / np.sqrt(count), 0.0)
+    return out
+
+
 def combined(rows: Sequence[tuple[tuple[int, ...], float]], channels: Sequence[int]) -> Array:
     """(C, C) Stouffer-combined z of pair rows (sensors, z)."""
     channels = list(channels)
-    n = len(channels)
-    zsum, count = np.zeros((n, n)), np.zeros((n, n))
+    zsum, count = np.zeros((len(channels),) * 2), np.zeros((len(channels),) * 2)
     for sensors, z in rows:
         if np.isfinite(z) and all(s in channels for s in sensors):
             a, b = (channels.index(s) for s in sensors)
             for i, j in ((a, b), (b, a)):
                 zsum[i, j] += z
                 count[i, j] += 1
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out: Array = np.where(count > 0, zsum / np.sqrt(count), 0.0)
-    return out
+    return _stouffer(zsum, count)
 
 
 def loop_group_evidence(rows: Rows, channels: Sequence[int], part: str) -> Array:
@@ -185,8 +186,7 @@ def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[A
     return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
 
 
-def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
-               used: list[int]) -> dict[int, dict[str, Any]]:
+def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:
     """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
     (ar, cr, okr), (as_, cs, oks) = (tuple(np.concatenate([p[i] for p in parts])
                                            for i in range(3)) for parts in (real, sim))
@@ -205,9 +205,6 @@ def own_excess(real: list[tuple[Array, ...]], sim: list[tuple[Array, ...]],
                   'acf': {lag: float(v) for lag, v in zip(OWN_LAGS, lags)},
                   'sd': float(np.sqrt(max(extra, 0.0)))}
     return out
-
-
-Parts = list[tuple[Array, ...]]
 
 
 def wandering(parts: Callable[[tuple[int, ...]], tuple[Parts, Parts]],
@@ -306,10 +303,9 @@ def shared_change(real: Sequence[Recording], sim: Sequence[Recording],
     p = float(sps.f.sf(v_real / expected, d_real, d_sim))
     excess = float(np.sqrt(max(v_real - expected, 0.0)))
     plain = _shared(flat, rounds=1)     # where a condition has one run, lines absorb a change
-    runs_, k = [], 0
-    for rows in rows_real:
-        runs_.append([(row[0], float(f)) for row, f in zip(rows, plain[k:k + len(rows)])])
-        k += len(rows)
+    per_rec = np.split(plain, np.cumsum([len(rows) for rows in rows_real])[:-1])
+    runs_ = [[(row[0], float(f)) for row, f in zip(rows, factors)]
+             for rows, factors in zip(rows_real, per_rec)]
     return {'p_value': p, 'ratio': float(v_real / expected), 'excess_sd': excess,
             'significant': p < CHANGE_ALPHA and excess >= MIN_CHANGE, 'runs': runs_,
             'sd': float(np.std(plain))}
@@ -320,15 +316,13 @@ def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, An
     shared factor."""
     sums: dict[tuple[str, str | None], list[Any]] = {}
     for rec, runs_ in zip(real, change['runs']):
-        x = rec.readings.astype(np.float64).copy()
+        x = rec.readings.astype(np.float64)
         for r, f in runs_:
             x[r] = x[r] / f
         for r, _ in runs_:
-            h = float(np.round(rec.heading_deg[r[0]], 1))
-            cell = (str(rec.condition[r[0]]), None if not np.isfinite(h) else f'heading {h:g} deg')
-            acc = sums.setdefault(cell, [0.0, 0])
-            acc[0] = acc[0] + x[r].sum(axis=0)
-            acc[1] += r.size
+            cond, h = _cell(rec, r)
+            _add(sums, (cond, None if not np.isfinite(h) else f'heading {h:g} deg'),
+                 x[r].sum(axis=0), r.size)
     out = []
     for row in rows:
         found = sums.get((str(row.key.condition), row.key.part))

@@ -3,14 +3,13 @@ with those chosen (the rules: docs/diagnosis.md, "The compound")."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
 from ..effects import REGISTRY, Effect, from_dict
-from ..effects.base import Array
-from ..effects.base import Candidate
-from .compare import Z_CAP, Comparison, chance, discrepancy, paired_p
+from ..effects.base import Array, Candidate
+from .compare import Z_CAP, Comparison, chance, discrepancy, paired_p, reduction
 from .families import PARTS, having
 from .target import Target
 
@@ -56,8 +55,7 @@ def runnable(effect: Effect) -> None:
     finite readings."""
     effect = from_dict(effect.to_dict())
     channels = max([8] + [s + 1 for s in effect.sensors])
-    rng = np.random.default_rng(0)
-    step = effect.start(2, channels, rng)
+    step = effect.start(2, channels, np.random.default_rng(0))
     if effect.stage.value == 'turn':
         out = step(np.array([10.0, -10.0]))
     else:
@@ -68,9 +66,8 @@ def runnable(effect: Effect) -> None:
 
 def second_seed(b: Target, chosen: list[Effect],
                 effects: list[Effect]) -> tuple[Target, Comparison, Comparison]:
-    """(the held-out target on another simulator seed, its comparisons with ``chosen`` and
-    with ``effects``): the paired bootstrap resamples the real data only, and the
-    simulator's own noise can make a small step."""
+    """(``b`` on another simulator seed, its comparisons with ``chosen`` and ``effects``): the
+    paired bootstrap resamples the real data only; the simulator's noise can make a step."""
     other = b.with_seed(b.seed + CONFIRM_SEED)
     return other, other.compare(chosen), other.compare(effects)
 
@@ -87,8 +84,7 @@ class Compound:
 
     @property
     def reduction(self) -> float:
-        return 1.0 - self.discrepancy_after / self.discrepancy_before \
-            if self.discrepancy_before > 0 else 0.0
+        return reduction(self.discrepancy_before, self.discrepancy_after)
 
     def to_json(self) -> dict[str, Any]:
         return {'chosen': self.steps, 'discrepancy_before': self.discrepancy_before,
@@ -98,12 +94,12 @@ class Compound:
 
 
 def entry(effect: Effect, note: str, d_before: float, d_after: float, d_prev: float,
-          p: float) -> dict[str, Any]:
+          p: float, counted_by: str) -> dict[str, Any]:
     return {'name': effect.name, 'sensors': list(effect.sensors),
             'parameters': effect.parameters(), 'discrepancy_after': d_after,
             'added_reduction': (d_prev - d_after) / d_before if d_before > 0 else 0.0,
-            'cumulative_reduction': 1.0 - d_after / d_before if d_before > 0 else 0.0,
-            'p_value': p, 'note': note}
+            'cumulative_reduction': reduction(d_before, d_after), 'p_value': p, 'note': note,
+            'counted_by': counted_by}
 
 
 @dataclass
@@ -128,8 +124,7 @@ class Selection:
         effect0, note0, cmp0, reps0 = best
         d_prev = cmp0.discrepancy
         steps = [entry(effect0, note0, self.d_before, d_prev, self.d_before,
-                       paired_p(before_reps, reps0, self.d_before, d_prev))]
-        steps[0]['counted_by'] = 'top_effect'
+                       paired_p(before_reps, reps0, self.d_before, d_prev), 'top_effect')]
         chosen, current, current_reps = [effect0], cmp0, reps0
         rejected: list[dict[str, Any]] = []
         remaining = [n for n in names if n != effect0.name]
@@ -145,7 +140,7 @@ class Selection:
                         after = self.b.compare(chosen + [cand.effect])
                     except Exception:         # noqa: BLE001 - cannot run: not fitting
                         cand = Candidate(name, None, 'cannot run')
-                if (cand.effect is None or after is None or after.discrepancy >= d_prev) and \
+                if (after is None or after.discrepancy >= d_prev) and \
                         name in LOOP and any(e.name in LOOP and e.name != name for e in chosen) \
                         and _part(current, 'closed_loop') > _part_chance(current, 'closed_loop'):
                     cand, after = self._loop_pair(chosen, name, cand, after)
@@ -178,8 +173,8 @@ class Selection:
             remaining.remove(step.cand.name)
             chosen, current, current_reps = step.effects, step.after, step.reps
             d_last, d_prev = d_prev, step.after.discrepancy
-            steps.append(entry(chosen[-1], step.cand.note, self.d_before, d_prev, d_last, step.p))
-            steps[-1]['counted_by'] = step.rule
+            steps.append(entry(chosen[-1], step.cand.note, self.d_before, d_prev, d_last, step.p,
+                               step.rule))
             if log:
                 log(f'compound: + {step.cand.name} -> {1 - d_prev / self.d_before:.2f}')
         for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
@@ -189,10 +184,9 @@ class Selection:
 
     def _loop_pair(self, chosen: list[Effect], name: str, cand: Candidate,
                    after: Comparison | None) -> tuple[Candidate, Comparison | None]:
-        """A latency and a turn error both move the readings' response to a turn: the one
-        chosen first takes the other's share.  The candidate is fitted given the chosen
-        effects other than the loop one, that one refitted given it; the better of that
-        and the plain fit."""
+        """A latency and a turn error both move the readings' response to a turn, so the one
+        chosen first takes the other's share: the candidate fitted without it and it refitted
+        given the candidate, if that beats the plain fit."""
         given = self.a.with_given([e for e in chosen if e.name not in LOOP])
         alone = fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
         if alone.effect is None:
@@ -207,55 +201,60 @@ class Selection:
             return cand, after
         if after is not None and after.discrepancy <= paired.discrepancy:
             return cand, after
-        return Candidate(name, alone.effect, alone.note + ' (fitted with the loop effect '
-                                                          'refitted)', given=out), paired
+        note = alone.note + ' (fitted with the loop effect refitted)'
+        return Candidate(name, alone.effect, note, given=out), paired
 
     def backfit(self, chosen: list[Effect]) -> list[Effect]:
-        """Each effect chosen before the last refitted given all the others, kept where it
-        lowers the fitting part's discrepancy."""
+        """Each effect chosen before the last refitted given all the others."""
         out = list(chosen)
         for i in range(len(out) - 1):
             out[i] = self.refit(out[i], out[:i] + out[i + 1:])
         return out
 
     def refit(self, effect: Effect, others: list[Effect]) -> Effect:
+        """``effect`` refitted given ``others``, if that lowers the fitting part's objective."""
         given = self.a.with_given(others)
         cand = fit_one(effect.name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
         if cand.effect is None or cand.effect == effect:
             return effect
-        return cand.effect if given.objective([cand.effect]) < given.objective([effect]) \
-            else effect
+        better = given.objective([cand.effect]) < given.objective([effect])
+        return cand.effect if better else effect
 
     def judge(self, current: Comparison, current_reps: Array, chosen: list[Effect],
               effects: list[Effect], after: Comparison,
               d_prev: float) -> tuple[str, Array, float, float]:
         """(the rule the step counts by or '', its replicate discrepancies, p, added share)."""
-        b, d_new = self.b, after.discrepancy
+        b, d_new, first = self.b, after.discrepancy, self.first
         reps = b.replicate_discrepancies(after)
         p = paired_p(current_reps, reps, d_prev, d_new)
         added = (d_prev - d_new) / self.d_before if self.d_before > 0 else 0.0
+
+        def confirmed(holds: Callable[[Target, Comparison, Comparison], bool]) -> bool:
+            """On a second simulator seed too the step is significant, lowers the
+            discrepancy and ``holds``."""
+            other, prev, new = second_seed(b, chosen, effects)
+            p2 = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
+                          prev.discrepancy, new.discrepancy)
+            return p2 < STEP_ALPHA and new.discrepancy < prev.discrepancy and \
+                holds(other, prev, new)
         rule = ''
         if p < STEP_ALPHA and d_new < d_prev:
-            before_any, left = _local_gains(self.first, current, after)
+            before_any, left = _local_gains(first, current, after)
             if added >= MIN_ADDED:
                 rule = 'min_added'
             elif before_any >= MIN_LOCAL:
                 rule = 'min_local'
-            elif left >= MIN_LEFT and self._confirmed(chosen, effects,
-                                                      lambda o, pv, nw: _local_gains(
-                                                          pv, pv, nw)[1] >= MIN_LEFT):
+            elif left >= MIN_LEFT and confirmed(
+                    lambda o, pv, nw: _local_gains(pv, pv, nw)[1] >= MIN_LEFT):
                 rule = 'min_left'
             elif d_prev - d_new >= MIN_LOCAL * d_prev and \
-                    _family_gain(b, self.first, current, after) >= MIN_LOCAL and \
-                    self._confirmed(chosen, effects, lambda o, pv, nw: _family_gain(
-                        o, self.first, pv, nw) >= MIN_LOCAL):
+                    _family_gain(b, first, current, after) >= MIN_LOCAL and \
+                    confirmed(lambda o, pv, nw: _family_gain(o, first, pv, nw) >= MIN_LOCAL):
                 rule = 'family'
-        if not rule:             # a small part's share, judged on its own replicates
-            part = part_step(b, self.first, current, after)
-            if part:
-                other, prev, new = second_seed(b, chosen, effects)
-                if part_step(other, self.first, prev, new) == part:
-                    rule = f'part: {part}'
+        part = '' if rule else part_step(b, first, current, after)
+        if part:                 # a small part's share, judged on its own replicates
+            other, prev, new = second_seed(b, chosen, effects)
+            rule = f'part: {part}' if part_step(other, first, prev, new) == part else ''
         # only a slow wander widens the levels' error bars without bringing anything
         # closer; an effect adding fast noise rightly widens the spreads' error bars
         if rule and effects[-1].name == 'temporal_drift' and not _closer(current, after):
@@ -265,26 +264,15 @@ class Selection:
             rule, self.vetoed[effects[-1].name] = '', worse
         return rule, reps, p, added
 
-    def _confirmed(self, chosen: list[Effect], effects: list[Effect],
-                   holds: Callable[[Target, Comparison, Comparison], bool]) -> bool:
-        """The step lowers the discrepancy on a second simulator seed too (in ``1 - alpha``
-        of its paired replicates) and ``holds`` there."""
-        other, prev, new = second_seed(self.b, chosen, effects)
-        p = paired_p(other.replicate_discrepancies(prev), other.replicate_discrepancies(new),
-                     prev.discrepancy, new.discrepancy)
-        return p < STEP_ALPHA and new.discrepancy < prev.discrepancy and holds(other, prev, new)
-
     def _simplest(self, step: Step, trials: list[tuple[float, Candidate, Comparison]],
                   current: Comparison, current_reps: Array, chosen: list[Effect],
                   d_prev: float) -> Step:
-        """A candidate with fewer free parameters that also counts and explains the held-out
-        data as well (``as_good``), else the step's (a spread law of exponent 0 shared by a
-        few sensors is a group of correlated noise: told apart by the data alone the group
-        would lose to the law's extra parameter by chance half the time)."""
-        rivals = sorted((t for t in trials if t[1] is not step.cand
-                         and free(t[1].name) < free(step.cand.name)),
-                        key=lambda t: (free(t[1].name), t[0]))
-        for d, rival, rival_after in rivals:
+        """The simplest candidate that also counts and explains the held-out data as well
+        (``as_good``), else the step's: a spread law of exponent 0 shared by a few sensors
+        is a group of correlated noise, and by the data alone the group would lose to the
+        law's extra parameter by chance half the time."""
+        for d, rival, rival_after in simpler(trials, step.cand.name, lambda t: t[1].name,
+                                             lambda t: t[0]):
             if not as_good(step.after.discrepancy, step.reps, d,
                            self.b.replicate_discrepancies(rival_after), STEP_ALPHA):
                 continue
@@ -308,6 +296,17 @@ class Selection:
                          'gain_left': round((d1 - d2) / d1, 4) if d1 > 0 else 0.0,
                          'p': round(paired_p(reps[0], reps[1], d1, d2), 3)}
         return out
+
+
+T = TypeVar('T')
+
+
+def simpler(rivals: Iterable[T], than: str, name: Callable[[T], str],
+            worse: Callable[[T], float]) -> list[T]:
+    """The parsimony rule's order: the ``rivals`` with fewer free parameters than the effect
+    ``than``, fewest first, then by ``worse``."""
+    return sorted((r for r in rivals if free(name(r)) < free(than)),
+                  key=lambda r: (free(name(r)), worse(r)))
 
 
 def part_step(b: Target, first: Comparison, current: Comparison, after: Comparison) -> str:
@@ -344,9 +343,8 @@ def part_step(b: Target, first: Comparison, current: Comparison, after: Comparis
 
 def loop_worse(b: Target, chosen: list[Effect], effects: list[Effect], current: Comparison,
                after: Comparison) -> str:
-    """The part of ``LOOP_PARTS`` that the simulator with ``effects`` (``after``) predicts
-    significantly worse than with ``chosen`` (``current``) on the held-out episodes
-    (one-sided, paired replicates), on a second simulator seed too; or ''."""
+    """The part of ``LOOP_PARTS`` that ``effects`` (``after``) predict significantly worse
+    than ``chosen`` (``current``) on the held-out episodes, on a second seed too; or ''."""
     def worse(t: Target, c: Comparison, a: Comparison) -> list[str]:
         out = []
         for part in LOOP_PARTS:
@@ -380,50 +378,41 @@ def _part_chance(c: Comparison, part: str) -> float:
 def _confounded(current: Comparison, after: Comparison) -> bool:
     """Does a step bring one part well closer while another moves away?  The effects
     chosen before it, fitted without it, took part of its share: worth refitting them."""
-    closer = away = False
-    for part in PARTS:
-        d1, d2 = _part(current, part), _part(after, part)
-        limit = _part_chance(current, part)
-        closer |= d1 > limit and d1 - d2 >= MIN_LOCAL * d1
-        away |= d2 > d1 and d2 > limit
-    return closer and away
+    d = [(_part(current, p), _part(after, p), _part_chance(current, p)) for p in PARTS]
+    return any(d1 > limit and d1 - d2 >= MIN_LOCAL * d1 for d1, d2, limit in d) and \
+        any(d2 > d1 and d2 > limit for d1, d2, limit in d)
 
 
 def _local_gains(before: Comparison, current: Comparison,
                  after: Comparison) -> tuple[float, float]:
-    """The largest share a step removes of one part's own held-out discrepancy: (of that
-    part before any effect, of what the chosen effects still leave of it)."""
-    before_any = left = 0.0
-    for part in PARTS:
-        d0, d1, d2 = (_part(c, part) for c in (before, current, after))
-        if d0 > 0:
-            before_any = max(before_any, (d1 - d2) / d0)
-        if d1 > _part_chance(current, part):
-            left = max(left, (d1 - d2) / d1)
-    return before_any, left
+    """The largest share a step removes of one part's held-out discrepancy: (of the part
+    before any effect, of what the chosen effects leave of it)."""
+    d = [[_part(c, p) for c in (before, current, after)] + [_part_chance(current, p)]
+         for p in PARTS]
+    return max([0.0] + [(d1 - d2) / d0 for d0, d1, d2, _ in d if d0 > 0]), \
+        max([0.0] + [(d1 - d2) / d1 for _, d1, d2, limit in d if d1 > limit])
 
 
 def _family_gain(b: Target, before: Comparison, current: Comparison,
                  after: Comparison) -> float:
-    """The largest share a step removes of one family's own held-out discrepancy before any
-    effect, among families where the fall is significant on their own replicates (a
-    dominant effect makes most of a part; a drift beside it acts on other families)."""
+    """The largest share a step removes of one family's held-out discrepancy before any
+    effect, where the fall is significant on the family's replicates (a dominant effect
+    makes most of a part; a drift beside it acts on other families)."""
     best = 0.0
     for fam in sorted({k.family for k in before.keys}):
-        of = (lambda f: f == fam)  # noqa: E731
-        d0, d1, d2 = (c.of(of).discrepancy for c in (before, current, after))
+        d0, d1, d2 = (c.of(fam).discrepancy for c in (before, current, after))
         if d0 <= 0 or d2 >= d1 or (d1 - d2) / d0 < MIN_LOCAL or \
                 d1 <= chance(sum(k.family == fam for k in current.keys)):
             continue
-        if paired_p(b.replicate_discrepancies(current.of(of)),
-                    b.replicate_discrepancies(after.of(of)), d1, d2) < STEP_ALPHA:
+        if paired_p(b.replicate_discrepancies(current.of(fam)),
+                    b.replicate_discrepancies(after.of(fam)), d1, d2) < STEP_ALPHA:
             best = max(best, (d1 - d2) / d0)
     return best
 
 
 def _closer(current: Comparison, after: Comparison) -> bool:
-    """Does the step bring the simulated statistics closer, judged at the error bars before
-    it: all of them, or those other than the ones a wander widens?"""
+    """Does the step bring the simulated statistics closer at the error bars before it: all
+    of them, or those other than the ones a wander widens?"""
     index = {k: i for i, k in enumerate(current.keys)}
     rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
     if not rows:
@@ -434,6 +423,5 @@ def _closer(current: Comparison, after: Comparison) -> bool:
     z = np.clip(np.nan_to_num(z, nan=0.0), -Z_CAP, Z_CAP)
     if discrepancy(z) < discrepancy(current.z[ci]):
         return True
-    widened = having('widened')
-    other = np.array([current.keys[i].family not in widened for i in ci], bool)
+    other = np.array([current.keys[i].family not in having('widened') for i in ci], bool)
     return discrepancy(z[other]) < discrepancy(current.z[ci][other])

@@ -2,7 +2,7 @@
 condition)."""
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -10,7 +10,8 @@ from ..recording import Recording
 
 
 def by_episode(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
-    """(fit, held-out) boolean masks over the samples."""
+    """(fit, held-out) boolean masks over the samples: alternate episodes of each condition,
+    or the first and second half of a condition's only episode."""
     fit = np.zeros(len(rec), bool)
     for label in rec.conditions():
         here = rec.condition == label
@@ -23,11 +24,6 @@ def by_episode(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return fit, ~fit
 
 
-def by_condition(rec: Recording, held_out: Iterable[str]) -> tuple[np.ndarray, np.ndarray]:
-    out = np.isin(rec.condition, list(held_out))
-    return ~out, out
-
-
 def split(recordings: Sequence[Recording], held_out: Sequence[str] | None = None
           ) -> tuple[list[tuple[int, Recording]], list[tuple[int, Recording]]]:
     """(fit, held-out): lists of (index of the source recording, part); a recording with no
@@ -35,11 +31,10 @@ def split(recordings: Sequence[Recording], held_out: Sequence[str] | None = None
     fit: list[tuple[int, Recording]] = []
     test: list[tuple[int, Recording]] = []
     for i, rec in enumerate(recordings):
-        a, b = by_episode(rec) if not held_out else by_condition(rec, held_out)
-        if a.any():
-            fit.append((i, rec.select(a)))
-        if b.any():
-            test.append((i, rec.select(b)))
+        out = np.isin(rec.condition, list(held_out)) if held_out else by_episode(rec)[1]
+        for side, mask in ((fit, ~out), (test, out)):
+            if mask.any():
+                side.append((i, rec.select(mask)))
     return fit, test
 
 

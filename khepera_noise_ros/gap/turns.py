@@ -11,6 +11,7 @@ import numpy as np
 from ..effects.base import Array, Key
 from ..recording import Recording
 from . import bootstrap
+from .closedloop import Part, sum_by, wrap
 from .protocol import calibrating, condition_world, ordered, runs
 
 COMMANDS = tuple(range(-9, 0)) + tuple(range(1, 10))     # signed powers, + to the right
@@ -20,54 +21,49 @@ SAMPLES = 3                      # samples after a turn whose settling is compar
 MIN_CHANGE = 100.0     # mean squared change a sensor's settling needs (10 readings a turn)
 SIDES = ('bright', 'dark')
 GRID = 0.5                 # degrees between the bearings an inferred turn is chosen from
+BEARINGS = np.arange(-180.0, 180.0, GRID)
 MIN_HEADINGS = 8           # a sweep's headings needed to infer a heading from readings
 MARGIN = 10.0              # degrees searched beyond twice the commanded turn
-Part = Callable[[bootstrap.Blocks, Array, int, str], tuple[list[Key], list[Array]]]
 
 
-def knock_every(rec: Recording, every: int) -> int | None:
-    """Steps between knocks, None when the recording's task has none."""
+def knocks(rec: Recording, steps: np.ndarray, every: int) -> np.ndarray:
+    """The rows a knock moves: none when the recording's task has no knock."""
     task = rec.manifest.get('task') or {}
-    return None if float(task.get('perturbation_deg', 1.0)) == 0.0 else int(every)
+    if float(task.get('perturbation_deg', 1.0)) == 0.0:
+        return np.zeros(len(steps), bool)
+    out: np.ndarray = steps % int(every) == 0
+    return out
 
 
 def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episodes: int,
-              every: int | None) -> dict[str, Array]:
+              every: int) -> dict[str, Array]:
     """Per-episode sums: per signed command the change of the readings' imbalance and,
     where headings are known, the turn made; the readings after a lone turn."""
     steps = rec.step[order]
     u = np.nan_to_num(rec.direction[order] * rec.power[order])
     r = x[order][:, :8].astype(np.float64)
     nxt = np.r_[(ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1), False]
-    knock = np.zeros(len(u), bool) if every is None else steps % every == 0
+    knock = knocks(rec, steps, every)
     ok = np.flatnonzero(nxt & ~np.r_[knock[1:], False] & (u != 0))
     onehot = (np.rint(u[ok])[:, None] == np.array(COMMANDS)[None, :]).astype(np.float64)
     imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
     change = imbalance[ok + 1] - imbalance[ok]
-    out = {'tc_imb': _by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
+    out = {'tc_imb': sum_by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
-        dh = (heading[ok + 1] - heading[ok] + 180.0) % 360.0 - 180.0
-        out['tc_turn'] = _by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
-    out.update(_settling(r, u, ep, steps, knock, episodes))
-    return out
+        dh = wrap(heading[ok + 1] - heading[ok])
+        out['tc_turn'] = sum_by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
+    return {**out, **_settling(r, u, ep, steps, knock, episodes)}
 
 
 def _moments(v: Array) -> Array:
     return np.stack([np.ones_like(v), v, v * v], axis=1)[:, None, :]
 
 
-def _by(ep: np.ndarray, values: Array, episodes: int) -> Array:
-    out = np.zeros((episodes,) + values.shape[1:])
-    np.add.at(out, ep, values)
-    return out
-
-
 def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray,
               episodes: int) -> dict[str, Array]:
-    """Lone turns: a command with rests of power 0 (no knock) ``BEFORE`` rows before and
-    ``AFTER`` rows after in one run of steps; per side of each sensor's change, the
-    products (reading after - settled)(before - settled) and (before - settled)^2."""
+    """Per side of each sensor's change over a lone turn, the products (reading after -
+    settled)(before - settled) and (before - settled)^2."""
     dd = np.zeros((episodes, 2, SAMPLES, r.shape[1]))
     d2, n = np.zeros((episodes, 2, r.shape[1])), np.zeros((episodes, 2, r.shape[1]))
     t = lone(u, ep, steps, knock)
@@ -105,8 +101,7 @@ def lone(u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray) -> np.n
 def stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], list[Array]]:
     """Stratum ``i``'s turn statistics: ``turn_imbalance`` and, with headings,
     ``turn_by_command`` and its scatter per signed command; ``turn_step_response``."""
-    keys: list[Key] = []
-    cols: list[Array] = []
+    out: list[tuple[Key, Array]] = []
     with np.errstate(invalid='ignore', divide='ignore'):
         for name, family in (('tc_imb', 'turn_imbalance'), ('tc_turn', 'turn_by_command')):
             if not b.has(name):
@@ -118,24 +113,18 @@ def stats(b: bootstrap.Blocks, s: Array, i: int, c: str) -> tuple[list[Key], lis
                 if m[0, j, 0] < MIN_TURNS:
                     continue
                 part = f'{"right" if command > 0 else "left"} {abs(command)}'
-                keys.append(Key(family, (), c, part))
-                cols.append(mean[:, j])
+                out.append((Key(family, (), c, part), mean[:, j]))
                 if family == 'turn_by_command':
-                    keys.append(Key('turn_by_command_scatter', (), c, part))
-                    cols.append(sd[:, j])
-        if not b.has('tc_dd'):
-            return keys, cols
-        dd, d2 = b.part(s, 'tc_dd')[:, i], b.part(s, 'tc_d2')[:, i]
-        n = b.part(s, 'tc_n')[0, i]
-        for side, label in enumerate(SIDES):
-            for k in range(d2.shape[-1]):
-                if n[side, k] < MIN_TURNS or d2[0, side, k] < MIN_CHANGE * n[side, k]:
-                    continue
-                for j in range(SAMPLES):
-                    keys.append(Key('turn_step_response', (k,), c,
-                                    f'sample {j} towards {label}'))
-                    cols.append(dd[:, side, j, k] / d2[:, side, k])
-    return keys, cols
+                    out.append((Key('turn_by_command_scatter', (), c, part), sd[:, j]))
+        if b.has('tc_dd'):
+            dd, d2 = b.part(s, 'tc_dd')[:, i], b.part(s, 'tc_d2')[:, i]
+            n = b.part(s, 'tc_n')[0, i]
+            out += [(Key('turn_step_response', (k,), c, f'sample {j} towards {label}'),
+                     dd[:, side, j, k] / d2[:, side, k])
+                    for side, label in enumerate(SIDES) for k in range(d2.shape[-1])
+                    if n[side, k] >= MIN_TURNS and d2[0, side, k] >= MIN_CHANGE * n[side, k]
+                    for j in range(SAMPLES)]
+    return [k for k, _ in out], [v for _, v in out]
 
 
 def with_stats(more: Part) -> Part:
@@ -149,13 +138,12 @@ def with_stats(more: Part) -> Part:
 
 def sums(rec: Recording, x: Array, every: int, more: Callable[..., dict[str, Any]]
          ) -> Callable[[np.ndarray, np.ndarray, int], dict[str, Array]]:
-    """``more``'s per-episode sums followed by the turn sums (``closedloop.blocks``) of a
-    turn calibration; a controller's episodes keep their statistics (its turns are few
-    per command and tied to what it saw)."""
+    """``more``'s per-episode sums followed by the turn sums of a turn calibration; a
+    controller's episodes keep their statistics (its turns are few per command and tied
+    to what it saw)."""
     if not calibrating(rec):
         return more
-    return lambda order, ep, m: {**more(order, ep, m),
-                                 **loop_sums(rec, x, order, ep, m, knock_every(rec, every))}
+    return lambda order, ep, m: {**more(order, ep, m), **loop_sums(rec, x, order, ep, m, every)}
 
 
 def measured(loops: Sequence[Recording], sweeps: Sequence[Recording],
@@ -168,14 +156,12 @@ def measured(loops: Sequence[Recording], sweeps: Sequence[Recording],
         _, ep, order, steps, pair = ordered(rec)
         u = np.nan_to_num(rec.direction[order] * rec.power[order])
         h = rec.heading_deg[order]
-        labels = rec.condition[order]
         per = np.array([condition_world(rec, str(c), config.world).deg_per_power
-                        for c in labels])
-        every = knock_every(rec, config.task.perturb_every)
-        knock = np.zeros(len(u), bool) if every is None else steps % every == 0
+                        for c in rec.condition[order]])
+        knock = knocks(rec, steps, config.task.perturb_every)
         nxt = np.r_[pair[1:], False] & ~np.r_[knock[1:], False]
         t = np.flatnonzero(nxt & (u != 0) & np.isfinite(h) & np.isfinite(np.r_[h[1:], np.nan]))
-        out.append(np.stack([u[t] * per[t], _wrap(h[t + 1] - h[t])], axis=1))
+        out.append(np.stack([u[t] * per[t], wrap(h[t + 1] - h[t])], axis=1))
         if calibrating(rec):
             out.append(_inferred(rec, sweeps, config, u * per, ep, steps, knock, h, order))
     return np.concatenate(out)
@@ -194,28 +180,23 @@ def _inferred(rec: Recording, sweeps: Sequence[Recording], config: Any, c: Array
     placed = h[first][np.searchsorted(first, alone, side='right') - 1]
     out = []
     for i, place in zip(alone, placed):
-        reference = _sweep(sweeps, condition_world(rec, str(rec.condition[order][i]),
-                                                   config.world))
+        world = condition_world(rec, str(rec.condition[order][i]), config.world)
+        reference = _sweep(sweeps, world)
         if reference is None or not np.isfinite(place):
             continue
         before = x[i - BEFORE:i + 1].mean(axis=0)
         after = x[i + AFTER - SETTLED + 1:i + AFTER + 1].mean(axis=0)
-        start = h[i] if np.isfinite(h[i]) else place + _infer(reference, before, place,
-                                                              -60.0, 60.0)
+        start = h[i] if np.isfinite(h[i]) else \
+            place + _infer(reference, before, place, -60.0, 60.0)
         made = _infer(reference, after, start, min(0.0, 2 * c[i]) - MARGIN,
                       max(0.0, 2 * c[i]) + MARGIN)
         out.append((c[i], made))
     return np.array(out, np.float64).reshape(-1, 2)
 
 
-def _wrap(deg: Array) -> Array:
-    out: Array = (deg + 180.0) % 360.0 - 180.0
-    return out
-
-
 def _sweep(sweeps: Sequence[Recording], world: Any) -> tuple[Array, Array] | None:
-    """(levels (bearings on the grid, 8), their sd per sensor) interpolated from the
-    stationary runs in ``world``'s condition, None with fewer than ``MIN_HEADINGS``."""
+    """(levels (``BEARINGS``, 8), their sd per sensor) interpolated from the stationary
+    runs in ``world``'s condition, None with fewer than ``MIN_HEADINGS``."""
     cells: dict[float, list[Array]] = {}
     spread = []
     for rec in sweeps:
@@ -224,14 +205,13 @@ def _sweep(sweeps: Sequence[Recording], world: Any) -> tuple[Array, Array] | Non
             if w != world or not np.isfinite(rec.heading_deg[r[0]]) or r.size < 2:
                 continue
             x = rec.readings[r][:, :8].astype(np.float64)
-            cells.setdefault(round(float(_wrap(rec.heading_deg[r[0]])), 1), []).append(x)
+            cells.setdefault(round(float(wrap(rec.heading_deg[r[0]])), 1), []).append(x)
             spread.append(x.var(axis=0, ddof=1))
     if len(cells) < MIN_HEADINGS:
         return None
     known = np.array(sorted(cells))
     means = np.array([np.concatenate(cells[b]).mean(axis=0) for b in known])
-    grid = np.arange(-180.0, 180.0, GRID)
-    table = np.stack([np.interp(grid, known, means[:, k], period=360.0) for k in range(8)],
+    table = np.stack([np.interp(BEARINGS, known, means[:, k], period=360.0) for k in range(8)],
                      axis=1)
     return table, np.sqrt(np.mean(spread, axis=0)) + 1.0
 
@@ -241,8 +221,7 @@ def _infer(reference: tuple[Array, Array], settled: Array, start: float, lo: flo
     """The offset from ``start`` (within ``lo`` .. ``hi`` degrees) of the bearing whose sweep
     levels lie nearest the settled readings."""
     table, sd = reference
-    grid = np.arange(-180.0, 180.0, GRID)
     offsets = np.arange(lo, hi + GRID, GRID)
-    at = np.rint((_wrap(start + offsets) + 180.0) / GRID).astype(int) % grid.size
+    at = np.rint((wrap(start + offsets) + 180.0) / GRID).astype(int) % BEARINGS.size
     cost = (((table[at] - settled) / sd) ** 2).sum(axis=1)
     return float(offsets[int(np.argmin(cost))])
