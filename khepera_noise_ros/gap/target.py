@@ -62,6 +62,7 @@ class Memory:
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
+    weights: OrderedDict[tuple[Any, ...], Array] = field(default_factory=OrderedDict)
 
 
 class Target:
@@ -158,11 +159,13 @@ class Target:
                 self.memory.layouts[key] = stationary.Layout(rec, self.block_lengths[i])
             lay = self.memory.layouts[key]
             used = rec.channels_used
-            x = rec.readings[:, used].astype(np.float64)
+            every = used == list(range(rec.channels))      # no copy of all the channels
+            x = rec.readings[:, used] if not every else rec.readings
+            x = x.astype(np.float64, copy=not every)
             total = lay.by_block if replicates else lay.by_stratum   # no bootstrap: strata
             b = stationary.blocks(rec, x, lay, total, converter.stationary_sums(
-                x, data.marks[:, used], lay.cell, lay.order, total))
-        s = bootstrap.resampled(b, replicates, seed)
+                x, data.marks if every else data.marks[:, used], lay.cell, lay.order, total))
+        s = bootstrap.resampled(b, replicates, seed, self._weights(b, replicates, seed))
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
                 keys, cols = closedloop.stats(b, s, turns.with_stats(converter.loop_stats))
@@ -172,6 +175,18 @@ class Target:
                 keys, cols = keys + more_keys, cols + more_cols
         values = np.concatenate([c if c.ndim == 2 else c[:, None] for c in cols], axis=1)
         return Stats(tuple(keys), values)
+
+    def _weights(self, b: bootstrap.Blocks, replicates: int, seed: int) -> Array | None:
+        """The bootstrap weights of blocks like ``b``'s (every replay's), the last few kept."""
+        if not replicates:
+            return None
+        key, memo = (replicates, seed, b.edges.tobytes()), self.memory.weights
+        if key not in memo:
+            memo[key] = bootstrap.weights(b, replicates, np.random.default_rng(seed))
+            if len(memo) > 8:
+                memo.popitem(last=False)
+        memo.move_to_end(key)
+        return memo[key]
 
     def _simulated(self, effects: Sequence[Effect], replicates: int,
                    kinds: Sequence[str] | None,
