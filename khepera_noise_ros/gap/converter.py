@@ -110,17 +110,17 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
 
 def _dropped(marks: Array, order: np.ndarray, total: Any) -> Array:
     """``total(marks[order])`` from the few marks there are (adding zeros adds nothing)."""
-    hit = np.flatnonzero(marks)
+    width = marks[0].size if len(marks) else 0
+    out: Array = np.zeros((total.size, width), np.result_type(marks.dtype, np.float32))
+    hit = np.flatnonzero(marks.ravel() != 0) if marks.any() else np.zeros(0, np.int64)
     if hit.size > marks.size // 64:
-        out: Array = total(marks[order])
+        out = total(marks[order])
         return out
-    width = marks[0].size
     place = np.full(len(marks), -1)
     place[order] = np.arange(order.size)
     at = place[hit // width]
     hit, at = hit[at >= 0], at[at >= 0]
     by = np.argsort(at, kind='stable')                # in the order ``total`` adds them
-    out = np.zeros((total.size, width), np.result_type(marks.dtype, np.float32))
     np.add.at(out, (total.group[at[by]], hit[by] % width), marks.reshape(-1)[hit[by]])
     return out.reshape((total.size,) + marks.shape[1:])
 

@@ -72,6 +72,11 @@ class Grouping:
         self.contiguous = np.unique(self.first_group).size == first.size
         self.segments = [(int(g), slice(a, b)) for g, a, b in zip(
             group[first], first, np.r_[first[1:], group.size])]
+        # short groups (blocks): per position, the groups that have a sample there and it
+        length = np.diff(np.r_[first, group.size])
+        self.steps = [(self.first_group[length > k], first[length > k] + k)
+                      for k in range(int(length.max()))] \
+            if self.contiguous and first.size and length.max() <= 16 else None
 
     def __call__(self, values: Array) -> Array:
         out: Array = np.asarray(self.pick @ values.reshape(values.shape[0], -1))
@@ -81,11 +86,16 @@ class Grouping:
         """(groups, C (C + 1) / 2) sums of the products y_k y_m, k <= m: a matrix product per
         group where groups are few (whole strata), else the products summed."""
         i, j = np.triu_indices(y.shape[1])
-        if len(self.segments) > 64:
-            return self(y[:, i] * y[:, j])
         out = np.zeros((self.size, i.size), y.dtype)
-        for g, at in self.segments:
-            out[g] = (y[at].T @ y[at])[i, j]
+        if len(self.segments) <= 64:
+            for g, at in self.segments:
+                out[g] = (y[at].T @ y[at])[i, j]
+        elif self.steps is not None:    # as ``self`` adds them: sample by sample in order
+            for groups, rows in self.steps:
+                v = y[rows]
+                out[groups] += v[:, i] * v[:, j]
+        else:
+            out = self(y[:, i] * y[:, j])
         return out
 
 
