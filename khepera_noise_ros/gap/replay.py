@@ -30,7 +30,7 @@ class Replayer:
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
         self.cache = cache if cache is not None else SimCache()
         self._light: dict[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = {}
-        self._copies: dict[tuple[Any, ...], tuple[Array, Array, Array, dict[str, Any]]] = {}
+        self._copies: dict[tuple[Any, ...], tuple[Array, np.ndarray, dict[str, Any]]] = {}
 
     def replay(self, effects: Sequence[Effect] = (), seed: int = 0, copies: int = 1) -> Recording:
         effects = tuple(self.config.effects) + tuple(effects)
@@ -38,11 +38,12 @@ class Replayer:
             return self._closed_loop(effects, seed, copies)
         shaped = tuple(staged(effects, Stage.WORLD)) if self.mode == 'model' else ()
         light, noise, scale = self.light(shaped)
-        tiled, step, column, index = self.copies(copies, shaped)
+        tiled, at, index = self.copies(copies, shaped)
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
+        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at]
         if scale != 1.0:
-            sim = sim * scale
-        return Recording(**index, readings=sim[step, :, column], manifest=self._manifest())
+            readings = readings * scale
+        return Recording(**index, readings=readings, manifest=self._manifest())
 
     def light(self, shaped: tuple[Effect, ...] = ()) -> tuple[Array, NoiseModel, float]:
         """(samples, channels, episodes) light of every step, the noise model, the scale,
@@ -74,9 +75,9 @@ class Replayer:
         return _hold(light) / scale, noise, scale
 
     def copies(self, copies: int, shaped: tuple[Effect, ...] = ()
-               ) -> tuple[Array, Array, Array, dict[str, Any]]:
+               ) -> tuple[Array, np.ndarray, dict[str, Any]]:
         """(the light of ``copies`` copies side by side, read-only; per replayed sample its
-        step and column; the replay's index columns)."""
+        step and column as a row of the light's (step, column) rows; the index columns)."""
         key = (copies, shaped)
         if key not in self._copies:
             if len(self._copies) >= 8:
@@ -94,8 +95,9 @@ class Replayer:
                      'power': np.full(len(rec) * copies, np.nan)}
             for value in index.values():
                 value.flags.writeable = False
-            self._copies[key] = (tiled, np.tile(rec.step, copies), np.concatenate(
-                [column + k * episodes_.size for k in range(copies)]), index)
+            at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
+                [column + k * episodes_.size for k in range(copies)])
+            self._copies[key] = (tiled, at, index)
         return self._copies[key]
 
     def _manifest(self) -> dict[str, Any]:
