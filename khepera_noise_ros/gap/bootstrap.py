@@ -50,8 +50,8 @@ def pack(parts: dict[str, Array]) -> tuple[Array, dict[str, tuple[slice, tuple[i
         at += size
     blocks = next(iter(parts.values())).shape[0] if parts else 0
     out = np.empty((blocks, at))
-    for name, value in parts.items():
-        out[:, layout[name][0]] = value.reshape(blocks, -1)
+    for name, value in parts.items():     # in double precision first: a faster copy
+        out[:, layout[name][0]] = value.reshape(blocks, -1).astype(np.float64, copy=False)
     return out, layout
 
 
