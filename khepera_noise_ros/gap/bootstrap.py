@@ -49,9 +49,8 @@ def pack(parts: dict[str, Array]) -> tuple[Array, dict[str, tuple[slice, tuple[i
         layout[name] = (slice(at, at + size), tuple(value.shape[1:]))
         at += size
     blocks = next(iter(parts.values())).shape[0] if parts else 0
-    out = np.empty((blocks, at))
-    for name, value in parts.items():     # in double precision first: a faster copy
-        out[:, layout[name][0]] = value.reshape(blocks, -1).astype(np.float64, copy=False)
+    out = np.concatenate([v.reshape(blocks, -1) for v in parts.values()], axis=1,
+                         dtype=np.float64) if parts else np.zeros((0, 0))
     return out, layout
 
 

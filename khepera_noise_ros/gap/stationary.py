@@ -3,7 +3,7 @@ heading) and per condition, over residuals about each run's mean."""
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, cast
+from typing import Any, Callable, Sequence, cast
 
 import numpy as np
 from scipy import sparse
@@ -60,13 +60,18 @@ class Grouping:
     totals, a fraction of the work)."""
 
     def __init__(self, group: np.ndarray, size: int, strata: np.ndarray, of_block: np.ndarray,
-                 lagged: np.ndarray | None = None):
+                 lags: Sequence[tuple[np.ndarray, np.ndarray, bool]] = ()):
         self.size, self.strata, self.of_block, self.group = size, strata, of_block, group
         self.pick = sparse.csr_matrix((np.ones(group.size, np.float32),
                                        (group, np.arange(group.size))), shape=(size, group.size))
         self.count = np.bincount(group, minlength=size).astype(np.float64)[:, None]
-        # (size, lags) the samples with a partner per lag: the same for every replay
-        self.lag_n = self(lagged.astype(np.float32)) if lagged is not None else None
+        # per lag of ``_lag_pairs``: the number of samples with a partner, and where the
+        # partners lie the lag's rows on, the sums of the products of rows that far apart
+        self.lag_n = self(np.stack([hit for hit, _, _ in lags], axis=1).astype(np.float32)) \
+            if lags else None
+        self.lag_picks = [sparse.csr_matrix((np.ones(np.count_nonzero(hit[:-lag]), np.float32), (
+            group[:-lag][hit[:-lag]], np.flatnonzero(hit[:-lag]))), shape=(size, group.size - lag))
+            if shifted else None for (hit, _, shifted), lag in zip(lags, LAGS)]
         first = np.flatnonzero(np.r_[True, np.diff(group) != 0]) if group.size else group
         self.first, self.first_group = first, group[first]      # each group's first sample
         self.contiguous = np.unique(self.first_group).size == first.size
@@ -129,9 +134,8 @@ class Layout:
         stratum = np.sort(stratum_of_chunk)
         strata = len(self.labels)
         self.lags = _lag_pairs(rec.step[self.order], self.run_of[self.order])
-        lagged = np.stack([hit for hit, _, _ in self.lags], axis=1)
-        self.by_block = Grouping(block, stratum.size, stratum, np.arange(stratum.size), lagged)
-        self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum, lagged)
+        self.by_block = Grouping(block, stratum.size, stratum, np.arange(stratum.size), self.lags)
+        self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum, self.lags)
         block_of = np.full(len(rec), -1)
         block_of[self.order] = block
         self.changes = _changes(rec, self.runs, block_of)
@@ -153,7 +157,7 @@ def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
     out.update({'s2': total.cross(y32), 's4': total(np.square(np.square(y32))),
                 'own_s2': total(own * own)})
     for name, v in (('lag_s', y32), ('own_lag_s', own)):
-        out[name] = np.stack([total(_lagged(v, *pair, lag)) for pair, lag in zip(lay.lags, LAGS)],
+        out[name] = np.stack([_lagged(v, total, k, *pair) for k, pair in enumerate(lay.lags)],
                              axis=1)
     out['lag_n'] = cast(Array, total.lag_n)
     at, samples, old, new = lay.changes
@@ -168,15 +172,17 @@ def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
     return out                          # single precision parts: doubles once packed
 
 
-def _lagged(v: Array, hit: np.ndarray, partner: np.ndarray, shifted: bool, lag: int) -> Array:
-    """Each sample's product with its partner ``lag`` steps later (0 without one);
-    ``shifted``: the partners lie ``lag`` rows on (a run's blocks consecutive)."""
-    out = np.zeros_like(v)
-    if shifted:
-        np.multiply(v[:-lag], v[lag:], out=out[:-lag], where=hit[:-lag, None])
-    else:
-        out[hit] = v[hit] * v[partner[hit]]
-    return out
+def _lagged(v: Array, total: Grouping, k: int, hit: np.ndarray, partner: np.ndarray,
+            shifted: bool) -> Array:
+    """Sums of each sample's product with its partner ``LAGS[k]`` steps later; ``shifted``:
+    the partners lie that many rows on (a run's blocks consecutive)."""
+    pick = total.lag_picks[k]
+    if pick is not None:       # the samples without a partner left out: they add nothing
+        out: Array = np.asarray(pick @ (v[:-LAGS[k]] * v[LAGS[k]:]))
+        return out
+    products = np.zeros_like(v)
+    products[hit] = v[hit] * v[partner[hit]]
+    return total(products)
 
 
 def own_part(y: AnyArray, ref: np.ndarray, by_run: Callable[[AnyArray], AnyArray],
