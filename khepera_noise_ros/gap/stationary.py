@@ -98,7 +98,10 @@ class Grouping:
         elif self.steps is not None:    # as ``self`` adds them: sample by sample in order
             for groups, rows in self.steps:
                 v = y[rows]
-                out[groups] += v[:, i] * v[:, j]
+                if groups.size == self.size:
+                    out += v[:, i] * v[:, j]
+                else:
+                    out[groups] += v[:, i] * v[:, j]
         else:
             out = self(y[:, i] * y[:, j])
         return out
