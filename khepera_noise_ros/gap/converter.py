@@ -111,11 +111,8 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
 def _dropped(marks: Array, order: np.ndarray, total: Any) -> Array:
     """``total(marks[order])`` from the few marks there are (adding zeros adds nothing)."""
     width = marks[0].size if len(marks) else 0
-    out: Array = np.zeros((total.size, width), np.result_type(marks.dtype, np.float32))
+    out = np.zeros((total.size, width), np.result_type(marks.dtype, np.float32))
     hit = np.flatnonzero(marks.ravel() != 0) if marks.any() else np.zeros(0, np.int64)
-    if hit.size > marks.size // 64:
-        out = total(marks[order])
-        return out
     place = np.full(len(marks), -1)
     place[order] = np.arange(order.size)
     at = place[hit // width]
