@@ -62,7 +62,7 @@ class Memory:
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
-    weights: OrderedDict[tuple[Any, ...], Array] = field(default_factory=OrderedDict)
+    weights: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     levels: dict[tuple[int, int], tuple[tuple[Key, ...], np.ndarray, np.ndarray]] = field(
         default_factory=dict)                     # the cell levels among a replay's keys
 
@@ -161,12 +161,11 @@ class Target:
                 self.memory.layouts[key] = stationary.Layout(rec, self.block_lengths[i])
             lay = self.memory.layouts[key]
             used = rec.channels_used
-            every = used == list(range(rec.channels))      # no copy of all the channels
-            x = rec.readings[:, used] if not every else rec.readings
-            x = x.astype(np.float64, copy=not every)
+            whole = used == list(range(rec.channels)) and rec.readings.flags.c_contiguous
+            x = (rec.readings if whole else rec.readings[:, used]).astype(np.float64, copy=False)
             total = lay.by_block if replicates else lay.by_stratum   # no bootstrap: strata
             b = stationary.blocks(rec, x, lay, total, converter.stationary_sums(
-                x, data.marks if every else data.marks[:, used], lay.cell, lay.order, total))
+                x, data.marks if whole else data.marks[:, used], lay.cell, lay.order, total))
         s = bootstrap.resampled(b, replicates, seed, self._weights(b, replicates, seed))
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
@@ -179,16 +178,13 @@ class Target:
         return Stats(tuple(keys), values)
 
     def _weights(self, b: bootstrap.Blocks, replicates: int, seed: int) -> Array | None:
-        """The bootstrap weights of blocks like ``b``'s (every replay's), the last few kept."""
-        if not replicates:
-            return None
+        """The bootstrap weights of blocks like ``b``'s (every replay's), the last 8 kept."""
         key, memo = (replicates, seed, b.edges.tobytes()), self.memory.weights
-        if key not in memo:
+        if replicates and key not in memo:
             memo[key] = bootstrap.weights(b, replicates, np.random.default_rng(seed))
             if len(memo) > 8:
-                memo.popitem(last=False)
-        memo.move_to_end(key)
-        return memo[key]
+                memo.pop(next(iter(memo)))
+        return memo.get(key)
 
     def _simulated(self, effects: Sequence[Effect], replicates: int,
                    kinds: Sequence[str] | None,
