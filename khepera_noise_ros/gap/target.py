@@ -6,9 +6,10 @@ import copy
 import dataclasses
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, Sequence, cast
+from typing import Any, Sequence
 
 import numpy as np
+from scipy import sparse
 
 from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
@@ -205,10 +206,10 @@ class Target:
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
-        code, size, count, cells, cond, real_var, names = self._plan(i, sim, copies)
-        x = sim.readings[:, self.channels]
-        sums = [np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])]
-        means = cast(Array, np.stack(sums, axis=1)).reshape(len(count), copies, x.shape[1])
+        by_unit, count, cells, cond, real_var, names = self._plan(i, sim, copies)
+        x = sim.readings if self.channels == list(range(sim.channels)) else \
+            sim.readings[:, self.channels]
+        means = np.asarray(by_unit @ x).reshape(len(count), copies, x.shape[1])
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
         spread = np.var(means, axis=1, ddof=1)[cells]
@@ -244,9 +245,11 @@ class Target:
                         entries.append((c, k, names.setdefault(condition, len(names)),
                                         real.variance[j]))
             e = np.array(entries, np.float64).reshape(-1, 4)
+            by_unit = sparse.csr_matrix((np.ones(code.size), (code, np.arange(code.size))),
+                                        shape=(len(labels) * copies, code.size))   # sums by unit
             self.memory.plans[(i, copies)] = (
-                code, len(labels) * copies, count, (e[:, 0].astype(int), e[:, 1].astype(int)),
-                e[:, 2].astype(int), e[:, 3], names)
+                by_unit, count, (e[:, 0].astype(int), e[:, 1].astype(int)), e[:, 2].astype(int),
+                e[:, 3], names)
         return self.memory.plans[(i, copies)]
 
     # -- comparisons ----------------------------------------------------------------------
