@@ -75,10 +75,10 @@ class Grouping:
         first = np.flatnonzero(np.r_[True, np.diff(group) != 0]) if group.size else group
         self.first, self.first_group = first, group[first]      # each group's first sample
         self.contiguous = np.unique(self.first_group).size == first.size
-        self.segments = [(int(g), slice(a, b)) for g, a, b in zip(
-            group[first], first, np.r_[first[1:], group.size])]
-        # short groups (blocks): per position, the groups that have a sample there and it
         length = np.diff(np.r_[first, group.size])
+        self.segments = [(int(g), slice(a, a + n)) for g, a, n in zip(self.first_group, first,
+                                                                      length)]
+        # short groups (blocks): per position, the groups that have a sample there and it
         self.steps = [(self.first_group[length > k], first[length > k] + k)
                       for k in range(int(length.max()))] \
             if self.contiguous and first.size and length.max() <= 16 else None
@@ -98,10 +98,7 @@ class Grouping:
         elif self.steps is not None:    # as ``self`` adds them: sample by sample in order
             for groups, rows in self.steps:
                 v = y[rows]
-                if groups.size == self.size:
-                    out += v[:, i] * v[:, j]
-                else:
-                    out[groups] += v[:, i] * v[:, j]
+                out[groups] += v[:, i] * v[:, j]
         else:
             out = self(y[:, i] * y[:, j])
         return out
