@@ -226,9 +226,10 @@ def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), s
     kernel = noise.apply if rounded else noise.added
     out = kernel(flat, d[:channels], d[channels:]).astype(np.float64)
     out = out.reshape(channels, samples, robots).transpose(1, 0, 2)
-    for e in staged(effects, Stage.READING):
+    reading = staged(effects, Stage.READING)
+    for e in reading:
         out = e.over_time(out, rng)
-    out = np.rint(out)                    # a new array: clipped in place
+    out = np.rint(out, out=None if reading else out)     # an array of its own: clipped in place
     result: Array = np.clip(out, 0.0, DARK, out=out)
     return result
 
@@ -241,11 +242,14 @@ def levels(level: Array, rounded: bool = True) -> AnyArray:
     """(channels, samples x units) float32 light levels the model's noise acts on: rounded
     unless the reading is rounded at the end, never clipped (a light-stage effect can
     take the light beyond what the converter reads; the converter saturates once)."""
+    out = np.empty((level.shape[1], level.shape[0], level.shape[2]), np.float32)
+    by_channel = level.transpose(1, 0, 2)
     if rounded:
-        level = np.rint(level)
-    flat = level.astype(np.float32)
-    out: AnyArray = np.ascontiguousarray(flat.transpose(1, 0, 2)).reshape(flat.shape[1], -1)
-    return out
+        np.rint(by_channel, out=out)            # rounded in double precision, then single
+    else:
+        out[...] = by_channel
+    flat: AnyArray = out.reshape(level.shape[1], -1)
+    return flat
 
 
 class SimCache:

@@ -49,26 +49,26 @@ def pack(parts: dict[str, Array]) -> tuple[Array, dict[str, tuple[slice, tuple[i
         layout[name] = (slice(at, at + size), tuple(value.shape[1:]))
         at += size
     blocks = next(iter(parts.values())).shape[0] if parts else 0
-    out = np.empty((blocks, at))
-    for name, value in parts.items():
-        out[:, layout[name][0]] = value.reshape(blocks, -1)
+    out = np.concatenate([v.reshape(blocks, -1) for v in parts.values()], axis=1,
+                         dtype=np.float64) if parts else np.zeros((0, 0))
     return out, layout
 
 
 def weights(blocks: Blocks, replicates: int, rng: np.random.Generator) -> Array:
     """(1 + R, B) block weights: the full data, then stratified bootstrap draws."""
-    b = blocks.stratum.size
-    w = np.zeros((1 + replicates, b))
+    w = np.zeros((1 + replicates, blocks.stratum.size))
     w[0] = 1.0
     for lo, hi in zip(blocks.edges[:-1], blocks.edges[1:]):
         if replicates and hi > lo:
-            picks = rng.integers(lo, hi, size=(replicates, hi - lo))
-            np.add.at(w, (np.arange(1, replicates + 1)[:, None], picks), 1.0)
+            picks = rng.integers(lo, hi, size=(replicates, hi - lo)) - lo
+            picks += np.arange(replicates)[:, None] * (hi - lo)     # counted per replicate
+            w[1:, lo:hi] = np.bincount(picks.ravel(), minlength=picks.size).reshape(picks.shape)
     return w
 
 
-def resampled(blocks: Blocks, replicates: int, seed: int) -> Array:
-    """(1 + R, S, D) each stratum's sums for the full data and ``replicates`` resamples."""
+def resampled(blocks: Blocks, replicates: int, seed: int, w: Array | None = None) -> Array:
+    """(1 + R, S, D) each stratum's sums for the full data and ``replicates`` resamples
+    (``w``: the ``weights`` of ``seed``, when known)."""
     strata = len(blocks.strata)
     out = np.zeros((1 + replicates, strata, blocks.sums.shape[1]))
     lo, hi = blocks.edges[:-1], blocks.edges[1:]
@@ -76,7 +76,7 @@ def resampled(blocks: Blocks, replicates: int, seed: int) -> Array:
     if used.any():
         out[0, used] = np.add.reduceat(blocks.sums, lo[used], axis=0)
     if replicates:
-        w = weights(blocks, replicates, np.random.default_rng(seed))
+        w = weights(blocks, replicates, np.random.default_rng(seed)) if w is None else w
         for s in np.flatnonzero(used):
             out[1:, s] = w[1:, lo[s]:hi[s]] @ blocks.sums[lo[s]:hi[s]]
     return out

@@ -23,6 +23,7 @@ TAIL, WIDTH = 0.02, 1.0          # where a pile is looked for, and how wide it i
 # readings and Z Poisson sds, and exceed the next real value inward
 EXPECTED, HELD, MIN_SHARE, Z = 5.0, 0.5, 0.002, 3.0
 MIN_VALUES = 12                  # values inside its range a sensor needs in closed loop
+BITS = 7                         # a block's count of a flag in a packed sum: below 128
 
 
 # -- piles and the lattice -------------------------------------------------------------
@@ -58,23 +59,29 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
                     total: Any) -> dict[str, Array]:
     """Sums by ``total``'s groups (of the samples ``order`` keeps) of the statistics."""
     o, c = order, x.shape[1]
-    low = np.nanmin(x) if np.isfinite(x).any() else 0.0
-    if not (np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5):
-        return {'edge': total(edge_hits(x)[o]), 'dropped': total(marks[o])}
+    low, high = (x.min(), x.max()) if x.size else (np.nan, np.nan)
+    if np.isfinite(low) and np.isfinite(high):
+        whole = np.all(x == np.round(x)) and high - low < 1e5
+    else:                                   # NaN or infinite readings
+        low = np.nanmin(x) if np.isfinite(x).any() else 0.0
+        whole = np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5
+    if not whole:
+        return {'edge': total(edge_hits(x)[o]), 'dropped': _dropped(marks, order, total)}
     # whole readings: everything from histograms of values (cell by channel)
     xi = (x - low).astype(np.int64)
     span, cells = int(xi.max()) + 1, int(cell.max()) + 1
     channel = np.arange(c)[None, :]
     code = (cell[:, None] * c + channel) * span + xi                   # (cell, channel, value)
     size = cells * c * span
-    kept = np.bincount(code[o].ravel(), minlength=size)
+    per_cell = np.bincount(code.ravel(), minlength=size)
     rest = np.ones(len(x), bool)
     rest[o] = False              # the few samples no block keeps count for the cell's mode
-    per_cell = (kept + np.bincount(code[rest].ravel(), minlength=size)).reshape(cells, c, span)
-    kept = kept.reshape(cells, c, span)
+    kept = per_cell - np.bincount(code[rest].ravel(), minlength=size) if rest.any() else per_cell
+    per_cell, kept = per_cell.reshape(cells, c, span), kept.reshape(cells, c, span)
     hist = per_cell.sum(axis=0)                                        # (C, span)
     values = np.arange(span) + low
-    table = np.zeros((span, c, 2 + len(MODULI)), np.float32)           # per value: ends, lattice
+    flag = 2 + len(MODULI)
+    table = np.zeros((span, c, flag), np.float32)                      # per value: ends, lattice
     for k in range(c):
         seen = hist[k] > 0
         for end, pile in enumerate(_piles_of(values[seen], hist[k][seen])):
@@ -83,17 +90,41 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
         residue = np.mod(values, q).astype(np.int64)
         modal = (hist @ (residue[:, None] == np.arange(q)[None, :])).argmax(axis=1)   # (C,)
         table[:, :, 2 + j] = residue[:, None] == modal[None, :]
-    xo = xi[o]
     mode = per_cell.argmax(axis=2)                                     # (cells, C)
     if total.size == cells:       # whole cells: each one's histogram of the kept samples
         sums = np.stack([kept[:, k] @ table[:, k] for k in range(c)], axis=1)
         at_mode = np.take_along_axis(kept, mode[:, :, None], axis=2)[:, :, 0].astype(float)
+    elif total.contiguous and total.count.max() < 1 << BITS:
+        # counts: per (cell, channel, value) its flags and whether it is the cell's mode, as
+        # bit fields of one integer added up per block (no field overflows)
+        packed = (table.astype(np.int64) << (BITS * np.arange(flag))).sum(axis=2).T
+        packed = np.repeat(packed[None], cells, axis=0)                # (cells, C, span)
+        packed[np.arange(cells)[:, None], channel, mode] += 1 << (BITS * flag)
+        by_block = np.zeros((total.size, c), np.int64)
+        by_block[total.first_group] = np.add.reduceat(packed.ravel()[code[o]], total.first, axis=0)
+        count = (by_block[..., None] >> (BITS * np.arange(flag + 1))) & ((1 << BITS) - 1)
+        sums, at_mode = count[..., :flag].astype(np.float32), count[..., flag].astype(np.float32)
     else:
+        xo = xi[o]
         flags = table.reshape(span * c, -1)[(xo * c + channel).ravel()].reshape(len(o), -1)
-        sums = total(flags).reshape(-1, c, 2 + len(MODULI))
+        sums = total(flags).reshape(-1, c, flag)
         at_mode = total((xo == mode[cell[o]]).astype(np.float32))
-    return {'edge': sums[:, :, :2], 'dropped': total(marks[o]), 'at_mode': at_mode,
+    return {'edge': sums[:, :, :2], 'dropped': _dropped(marks, order, total), 'at_mode': at_mode,
             'residue': sums[:, :, 2:]}
+
+
+def _dropped(marks: Array, order: np.ndarray, total: Any) -> Array:
+    """``total(marks[order])`` from the few marks there are (adding zeros adds nothing)."""
+    width = marks[0].size if len(marks) else 0
+    out = np.zeros((total.size, width), np.result_type(marks.dtype, np.float32))
+    hit = np.flatnonzero(marks.ravel() != 0) if marks.any() else np.zeros(0, np.int64)
+    place = np.full(len(marks), -1)
+    place[order] = np.arange(order.size)
+    at = place[hit // width]
+    hit, at = hit[at >= 0], at[at >= 0]
+    by = np.argsort(at, kind='stable')                # in the order ``total`` adds them
+    np.add.at(out, (total.group[at[by]], hit[by] % width), marks.reshape(-1)[hit[by]])
+    return out.reshape((total.size,) + marks.shape[1:])
 
 
 def _piles_of(values: Array, counts: np.ndarray) -> tuple[float, float]:

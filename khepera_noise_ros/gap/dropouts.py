@@ -49,19 +49,17 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     and highest value, (C, 2) extremes); ``moving``: the light moves within a run."""
     marks = np.zeros(x.shape + (2,), np.float32)
     xt = np.ascontiguousarray(x.T)        # channel by channel: far faster than by column
-    ends = _extremes(xt)
+    ends, gaps = _extremes(xt)
     if not runs.order.size or x.size == 0:
         return x, marks, ends
     xt = xt.astype(np.float64, copy=False)
-    # every channel's readings at its extremes, position by position within (channel, end)
-    found = [(2 * k + end, runs.place[np.flatnonzero(xt[k] == ends[k, end])])
-             for k in range(x.shape[1]) for end in (0, 1)]
-    group = np.concatenate([np.full(i.size, g) for g, i in found])
-    at = np.concatenate([i for _, i in found])
-    keep = at >= 0
-    group, at = group[keep], at[keep]
-    order = np.lexsort((at, group))
-    group, at = group[order], at[order]
+    # every channel's readings at its extremes, by (channel, end) and position
+    found = []
+    for g in range(2 * x.shape[1]):
+        at = runs.place[np.flatnonzero(xt[g // 2] == ends[g // 2, g % 2])]
+        found.append(np.sort(at[at >= 0]))
+    group = np.repeat(np.arange(len(found)), [i.size for i in found])
+    at = np.concatenate(found)
     if moving:             # a value held for stretches is a limit the light reaches
         held = {int(g) for g in np.unique(group) if _stretched(at[group == g], runs.run_of)}
         keep = ~np.isin(group, list(held))
@@ -70,20 +68,21 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     group, at = group[keep], at[keep]
     if not at.size:
         return x, marks, ends
-    far, lower, d, alone = _local(xt, at, group // 2, runs)
-    repaired, deviations = x, {}
-    for g in np.unique(group[far | alone]):
+    local = _local if gaps or not np.isfinite(ends).all() else _local_finite
+    far, lower, d, alone = local(xt, at, group, ends, runs)
+    repaired, scales = x, {}
+    for g in np.unique(group[alone]):             # far lies within alone
         mine = group == g
         k, end = divmod(int(g), 2)
         i, f, low, dist, apart = at[mine], far[mine], lower[mine], d[mine], alone[mine]
         if (apart & ~f).any() and _detached(xt[k], end):
             f = apart             # beyond the noise's reach: isolated and away suffices
         elif f.any():
-            if k not in deviations:
-                dev = np.abs(xt[k, runs.order] - _median4(xt[k], runs.near))
-                deviations[k] = np.where(np.isfinite(dev), dev, 0.0)
-            scale = _scales(deviations[k], runs, np.unique(runs.run_of[i[f]]))
-            f[f] = dist[f] >= SPREADS * scale[runs.run_of[i[f]]]
+            run = runs.run_of[i[f]]
+            for r in np.unique(run):
+                if (k, r) not in scales:
+                    scales[(k, r)] = _scale(xt[k], runs, int(r))
+            f[f] = dist[f] >= SPREADS * np.array([scales[(k, r)] for r in run.tolist()])
         if f.any():
             if repaired is x:
                 repaired = x.copy()
@@ -92,18 +91,20 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     return repaired, marks, ends
 
 
-def _extremes(xt: Array) -> Array:
-    """(C, 2) each row's least and greatest finite value."""
+def _extremes(xt: Array) -> tuple[Array, bool]:
+    """((C, 2) each row's least and greatest finite value, whether any value is NaN)."""
     if not np.isnan(xt).any():
-        return np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1)
+        return np.stack([xt.min(axis=1), xt.max(axis=1)], axis=1), False
     with np.errstate(invalid='ignore'), warnings.catch_warnings():
         warnings.simplefilter('ignore', RuntimeWarning)         # a channel all NaN
-        return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1)
+        return np.stack([np.nanmin(xt, axis=1), np.nanmax(xt, axis=1)], axis=1), True
 
 
-def _local(xt: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, ...]:
+def _local(xt: Array, i: AnyArray, group: AnyArray, ends: Array,
+           runs: Runs) -> tuple[AnyArray, ...]:
     """(far, the lower middle of the neighbours, distance, isolated and ``AWAY``) of the
-    readings at positions ``i`` of channels ``k`` (rows of ``xt``)."""
+    readings at positions ``i`` of channel and end ``group`` (``2 k + end``)."""
+    k = group // 2
     value = xt[k, runs.order[i]]
     around = xt[k, runs.near[:, i]]
     around = np.where(around == value[None, :], np.nan, around)
@@ -118,11 +119,40 @@ def _local(xt: Array, i: AnyArray, k: AnyArray, runs: Runs) -> tuple[AnyArray, .
         rough = np.nanmax(around, axis=0) - np.nanmin(around, axis=0)
         alone = (count >= ISOLATED) & (d >= AWAY)
         far = alone & (d >= STEADY * rough)
+    return _far(xt, i, k, runs, far, d), lower, d, alone
+
+
+def _local_finite(xt: Array, i: AnyArray, group: AnyArray, ends: Array,
+                  runs: Runs) -> tuple[AnyArray, ...]:
+    """``_local`` where every reading is finite (the same numbers where a reading is
+    isolated): the neighbours sorted by a network, those at the reading (itself an
+    extreme) first once the highest end is negated."""
+    k, sign = group // 2, 1.0 - 2.0 * (group % 2)
+    v = ends.ravel()[group] * sign
+    a = xt.ravel()[k * xt.shape[1] + runs.near[:, i]] * sign
+    count = 4 - np.count_nonzero(a == v, axis=0)
+    s0, s1 = np.minimum(a[0], a[1]), np.maximum(a[0], a[1])
+    s2, s3 = np.minimum(a[2], a[3]), np.maximum(a[2], a[3])
+    s0, s2 = np.minimum(s0, s2), np.maximum(s0, s2)
+    s1, s3 = np.minimum(s1, s3), np.maximum(s1, s3)
+    s1, s2 = np.minimum(s1, s2), np.maximum(s1, s2)
+    four = count == 4
+    near = np.where(four, s1, s2)           # the middle pair: (near, s2), near = s2 of three
+    d = np.abs(v - 0.5 * (near + s2))
+    lower = np.where(sign > 0, near, -s2)
+    rough = s3 - np.where(four, s0, s1)
+    alone = (count >= ISOLATED) & (d >= AWAY)
+    return _far(xt, i, k, runs, alone & (d >= STEADY * rough), d), lower, d, alone
+
+
+def _far(xt: Array, i: AnyArray, k: AnyArray, runs: Runs, far: AnyArray,
+         d: Array) -> AnyArray:
+    """``far`` less the readings within ``QUICK`` of the reach of a quick robust sd."""
     if far.any():
         near = xt[k[far], runs.order[_neighbours(runs, WINDOW, i[far])]]
         spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
         far[far] = d[far] >= QUICK * SPREADS * spread
-    return far, lower, d, alone
+    return far
 
 
 def _neighbours(runs: Runs, offsets: tuple[int, ...],
@@ -137,19 +167,13 @@ def _neighbours(runs: Runs, offsets: tuple[int, ...],
     return out
 
 
-def _median4(col: Array, neighbours: np.ndarray) -> Array:
-    """The median of four neighbours (their sum less the extremes, halved)."""
-    v = col[neighbours]
-    out: Array = 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0))
-    return out
-
-
-def _scales(deviations: Array, runs: Runs, wanted: np.ndarray) -> Array:
-    """Per ``wanted`` run (others inf): the robust sd of its deviations."""
-    out = np.full(runs.sizes.size, np.inf)
-    for r in wanted:
-        out[r] = 1.4826 * np.median(deviations[runs.first[r]:runs.first[r] + runs.sizes[r]])
-    return out
+def _scale(col: Array, runs: Runs, r: int) -> float:
+    """The robust sd of run ``r``'s deviations from the median of each reading's ``NEAR``
+    neighbours (their sum less the extremes, halved)."""
+    at = slice(runs.first[r], runs.first[r] + runs.sizes[r])
+    v = col[runs.near[:, at]]
+    dev = np.abs(col[runs.order[at]] - 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0)))
+    return float(1.4826 * np.median(np.where(np.isfinite(dev), dev, 0.0)))
 
 
 def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
@@ -177,13 +201,14 @@ def _flanked(i: np.ndarray, run_of: np.ndarray, group: np.ndarray) -> np.ndarray
 
 def _detached(col: Array, end: int) -> bool:
     """Does the extreme value stand apart from the next values inward, beyond the noise?"""
-    x = col[np.isfinite(col)]
+    x = col if np.isfinite(col).all() else col[np.isfinite(col)]
     x = x if end == 0 else -x
     low = x.min()
-    rest = x[x > low]
-    if rest.size < SPACINGS + 1 or rest.min() - low < AWAY or \
-            np.count_nonzero(x == low) < DETACHED_HITS:
+    above = x > low
+    if np.count_nonzero(above) < SPACINGS + 1 or x.min(where=above, initial=np.inf) - low < AWAY \
+            or np.count_nonzero(x == low) < DETACHED_HITS:
         return False
+    rest = x[above]
     m = min(rest.size, 64 * (SPACINGS + 1))     # the distinct values among the nearest m
     near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
     if near.size < 3:

@@ -3,7 +3,7 @@ episode; closed loop: the manifest's genome), in the world of each condition."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -30,7 +30,7 @@ class Replayer:
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
         self.cache = cache if cache is not None else SimCache()
         self._light: dict[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = {}
-        self._copies: dict[tuple[Any, ...], tuple[Array, Array, Array, dict[str, Any]]] = {}
+        self._copies: dict[tuple[Any, ...], tuple[Array, np.ndarray, dict[str, Any]]] = {}
 
     def replay(self, effects: Sequence[Effect] = (), seed: int = 0, copies: int = 1) -> Recording:
         effects = tuple(self.config.effects) + tuple(effects)
@@ -38,11 +38,12 @@ class Replayer:
             return self._closed_loop(effects, seed, copies)
         shaped = tuple(staged(effects, Stage.WORLD)) if self.mode == 'model' else ()
         light, noise, scale = self.light(shaped)
-        tiled, step, column, index = self.copies(copies, shaped)
+        tiled, at, index = self.copies(copies, shaped)
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
+        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at]
         if scale != 1.0:
-            sim = sim * scale
-        return Recording(**index, readings=sim[step, :, column], manifest=self._manifest())
+            readings = readings * scale
+        return Recording(**index, readings=readings, manifest=self._manifest())
 
     def light(self, shaped: tuple[Effect, ...] = ()) -> tuple[Array, NoiseModel, float]:
         """(samples, channels, episodes) light of every step, the noise model, the scale,
@@ -74,9 +75,9 @@ class Replayer:
         return _hold(light) / scale, noise, scale
 
     def copies(self, copies: int, shaped: tuple[Effect, ...] = ()
-               ) -> tuple[Array, Array, Array, dict[str, Any]]:
+               ) -> tuple[Array, np.ndarray, dict[str, Any]]:
         """(the light of ``copies`` copies side by side, read-only; per replayed sample its
-        step and column; the replay's index columns)."""
+        step and column as a row of the light's (step, column) rows; the index columns)."""
         key = (copies, shaped)
         if key not in self._copies:
             if len(self._copies) >= 8:
@@ -94,8 +95,9 @@ class Replayer:
                      'power': np.full(len(rec) * copies, np.nan)}
             for value in index.values():
                 value.flags.writeable = False
-            self._copies[key] = (tiled, np.tile(rec.step, copies), np.concatenate(
-                [column + k * episodes_.size for k in range(copies)]), index)
+            at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
+                [column + k * episodes_.size for k in range(copies)])
+            self._copies[key] = (tiled, at, index)
         return self._copies[key]
 
     def _manifest(self) -> dict[str, Any]:
@@ -134,19 +136,27 @@ class Replayer:
 
 def _run(env: EffectEpisodes, genome: Array, seeds: np.ndarray, episode: np.ndarray,
          label: str) -> dict[str, np.ndarray]:
-    n = seeds.size
-    w = network.unpack(np.repeat(genome[None], n, axis=0))
-    readings: Array | None = env.reset(seeds)
-    rows = []
+    w = network.unpack(np.repeat(genome[None], seeds.size, axis=0))
+    return _episodes(env, seeds, None, lambda t, readings: network.act(w, readings), episode,
+                     label)
+
+
+def _episodes(env: EffectEpisodes, seeds: np.ndarray, bearing_deg: Array | None,
+              command: Callable[[int, Array], tuple[Any, Any]], episode: np.ndarray,
+              label: str) -> dict[str, np.ndarray]:
+    """The columns of ``env``'s episodes from ``seeds`` with the (direction, power) of
+    ``command`` at each step, the episodes numbered ``episode``."""
+    readings: Array | None = env.reset(seeds, bearing_deg=bearing_deg)
+    rows: list[tuple[Any, ...]] = []
     while readings is not None:
-        direction, power = network.act(w, readings)
+        direction, power = command(len(rows), readings)
         rows.append((env.bearing_deg.copy(), readings.copy(), direction, power))
         readings = env.step(direction, power)
-    t = len(rows)
+    n, t = seeds.size, len(rows)
     return {'episode': np.repeat(episode, t), 'step': np.tile(np.arange(t), n),
             'heading_deg': np.stack([r[0] for r in rows], axis=1).ravel(),
             'condition': np.full(n * t, label),
-            'readings': np.stack([r[1] for r in rows], axis=1).reshape(n * t, SENSORS)
+            'readings': np.stack([r[1] for r in rows], axis=1).reshape(n * t, -1)
             .astype(np.float64),
             'direction': np.stack([r[2] for r in rows], axis=1).ravel().astype(np.float64),
             'power': np.stack([r[3] for r in rows], axis=1).ravel().astype(np.float64)}
@@ -181,19 +191,5 @@ def run_calibration(env: EffectEpisodes, rec: Recording, episodes: np.ndarray,
         command[0, s, i] = np.nan_to_num(rec.direction[at], nan=1.0)
         command[1, s, i] = np.nan_to_num(rec.power[at])
     command = np.tile(command, (1, 1, copies))
-    readings: Array | None = env.reset(seeds, bearing_deg=np.tile(start, copies))
-    rows = []
-    t = 0
-    while readings is not None:
-        d, p = command[0, t].astype(np.int64), command[1, t].astype(np.int64)
-        rows.append((env.bearing_deg.copy(), readings.copy(), d, p))
-        readings = env.step(d, p)
-        t += 1
-    n, t = seeds.size, len(rows)
-    return {'episode': np.repeat(ids, t), 'step': np.tile(np.arange(t), n),
-            'heading_deg': np.stack([r[0] for r in rows], axis=1).ravel(),
-            'condition': np.full(n * t, label),
-            'readings': np.stack([r[1] for r in rows], axis=1).reshape(n * t, -1)
-            .astype(np.float64),
-            'direction': np.stack([r[2] for r in rows], axis=1).ravel().astype(np.float64),
-            'power': np.stack([r[3] for r in rows], axis=1).ravel().astype(np.float64)}
+    return _episodes(env, seeds, np.tile(start, copies), lambda t, _: (
+        command[0, t].astype(np.int64), command[1, t].astype(np.int64)), ids, label)

@@ -3,7 +3,7 @@ heading) and per condition, over residuals about each run's mean."""
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable
+from typing import Any, Callable, Sequence, cast
 
 import numpy as np
 from scipy import sparse
@@ -59,14 +59,29 @@ class Grouping:
     bootstrap, or whole strata where only the full data's sums are wanted (the same
     totals, a fraction of the work)."""
 
-    def __init__(self, group: np.ndarray, size: int, strata: np.ndarray, of_block: np.ndarray):
-        self.size, self.strata, self.of_block = size, strata, of_block
+    def __init__(self, group: np.ndarray, size: int, strata: np.ndarray, of_block: np.ndarray,
+                 lags: Sequence[tuple[np.ndarray, np.ndarray, bool]] = ()):
+        self.size, self.strata, self.of_block, self.group = size, strata, of_block, group
         self.pick = sparse.csr_matrix((np.ones(group.size, np.float32),
                                        (group, np.arange(group.size))), shape=(size, group.size))
         self.count = np.bincount(group, minlength=size).astype(np.float64)[:, None]
+        # per lag of ``_lag_pairs``: the number of samples with a partner, and where the
+        # partners lie the lag's rows on, the sums of the products of rows that far apart
+        self.lag_n = self(np.stack([hit for hit, _, _ in lags], axis=1).astype(np.float32)) \
+            if lags else None
+        self.lag_picks = [sparse.csr_matrix((np.ones(np.count_nonzero(hit[:-lag]), np.float32), (
+            group[:-lag][hit[:-lag]], np.flatnonzero(hit[:-lag]))), shape=(size, group.size - lag))
+            if shifted else None for (hit, _, shifted), lag in zip(lags, LAGS)]
         first = np.flatnonzero(np.r_[True, np.diff(group) != 0]) if group.size else group
-        self.segments = [(int(g), slice(a, b)) for g, a, b in zip(
-            group[first], first, np.r_[first[1:], group.size])]
+        self.first, self.first_group = first, group[first]      # each group's first sample
+        self.contiguous = np.unique(self.first_group).size == first.size
+        length = np.diff(np.r_[first, group.size])
+        self.segments = [(int(g), slice(a, a + n)) for g, a, n in zip(self.first_group, first,
+                                                                      length)]
+        # short groups (blocks): per position, the groups that have a sample there and it
+        self.steps = [(self.first_group[length > k], first[length > k] + k)
+                      for k in range(int(length.max()))] \
+            if self.contiguous and first.size and length.max() <= 16 else None
 
     def __call__(self, values: Array) -> Array:
         out: Array = np.asarray(self.pick @ values.reshape(values.shape[0], -1))
@@ -76,11 +91,16 @@ class Grouping:
         """(groups, C (C + 1) / 2) sums of the products y_k y_m, k <= m: a matrix product per
         group where groups are few (whole strata), else the products summed."""
         i, j = np.triu_indices(y.shape[1])
-        if len(self.segments) > 64:
-            return self(y[:, i] * y[:, j])
         out = np.zeros((self.size, i.size), y.dtype)
-        for g, at in self.segments:
-            out[g] = (y[at].T @ y[at])[i, j]
+        if len(self.segments) <= 64:
+            for g, at in self.segments:
+                out[g] = (y[at].T @ y[at])[i, j]
+        elif self.steps is not None:    # as ``self`` adds them: sample by sample in order
+            for groups, rows in self.steps:
+                v = y[rows]
+                out[groups] += v[:, i] * v[:, j]
+        else:
+            out = self(y[:, i] * y[:, j])
         return out
 
 
@@ -113,11 +133,11 @@ class Layout:
         self.order, block = kept[by], block[by]          # kept samples, block by block
         stratum = np.sort(stratum_of_chunk)
         strata = len(self.labels)
-        self.by_block = Grouping(block, stratum.size, stratum, np.arange(stratum.size))
-        self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum)
+        self.lags = _lag_pairs(rec.step[self.order], self.run_of[self.order])
+        self.by_block = Grouping(block, stratum.size, stratum, np.arange(stratum.size), self.lags)
+        self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum, self.lags)
         block_of = np.full(len(rec), -1)
         block_of[self.order] = block
-        self.lags = _lag_pairs(rec.step[self.order], self.run_of[self.order])
         self.changes = _changes(rec, self.runs, block_of)
         self.own_kept = np.zeros((len(rec), 1), np.float32)    # in sample order
         self.own_kept[self.run_order, 0] = position >= SKIP
@@ -137,9 +157,9 @@ def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
     out.update({'s2': total.cross(y32), 's4': total(np.square(np.square(y32))),
                 'own_s2': total(own * own)})
     for name, v in (('lag_s', y32), ('own_lag_s', own)):
-        out[name] = np.stack([total(_lagged(v, hit, partner, lag))
-                              for (hit, partner), lag in zip(lay.lags, LAGS)], axis=1)
-    out['lag_n'] = total(np.stack([hit for hit, _ in lay.lags], axis=1).astype(np.float32))
+        out[name] = np.stack([_lagged(v, total, k, *pair) for k, pair in enumerate(lay.lags)],
+                             axis=1)
+    out['lag_n'] = cast(Array, total.lag_n)
     at, samples, old, new = lay.changes
     dd, d2 = np.zeros((total.size, STEP_LAGS, c)), np.zeros((total.size, STEP_LAGS, c))
     if at.size:
@@ -149,19 +169,20 @@ def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
         np.add.at(d2, total.of_block[at],
                   np.broadcast_to((change ** 2)[:, None, :], (at.size, STEP_LAGS, c)))
     out['step_dd'], out['step_d2'] = dd, d2
-    return {k: v.astype(np.float64) for k, v in out.items()}
+    return out                          # single precision parts: doubles once packed
 
 
-def _lagged(v: Array, hit: np.ndarray, partner: np.ndarray, lag: int) -> Array:
-    """Each sample's product with its partner ``lag`` steps later (0 without one); the
-    partners lie ``lag`` rows on wherever a run's blocks are consecutive."""
-    out = np.zeros_like(v)
-    if partner.size > lag and np.array_equal(partner[:-lag][hit[:-lag]],
-                                             np.flatnonzero(hit[:-lag]) + lag):
-        np.multiply(v[:-lag], v[lag:], out=out[:-lag], where=hit[:-lag, None])
-    else:
-        out[hit] = v[hit] * v[partner[hit]]
-    return out
+def _lagged(v: Array, total: Grouping, k: int, hit: np.ndarray, partner: np.ndarray,
+            shifted: bool) -> Array:
+    """Sums of each sample's product with its partner ``LAGS[k]`` steps later; ``shifted``:
+    the partners lie that many rows on (a run's blocks consecutive)."""
+    pick = total.lag_picks[k]
+    if pick is not None:       # the samples without a partner left out: they add nothing
+        out: Array = np.asarray(pick @ (v[:-LAGS[k]] * v[LAGS[k]:]))
+        return out
+    products = np.zeros_like(v)
+    products[hit] = v[hit] * v[partner[hit]]
+    return total(products)
 
 
 def own_part(y: AnyArray, ref: np.ndarray, by_run: Callable[[AnyArray], AnyArray],
@@ -246,8 +267,9 @@ def keys(strata: tuple[tuple[str, float | None], ...], ch: tuple[int, ...],
                   for k, ok in zip(ch, timed) if ok for j in range(STEP_LAGS)]
 
 
-def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per lag, (hit, partner): samples with a partner ``lag`` steps later in their run."""
+def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, bool]]:
+    """Per lag, (hit, partner, shifted): samples with a partner ``lag`` steps later in their
+    run, and whether every partner lies ``lag`` rows on."""
     key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps \
         if steps.size else steps.astype(np.int64)
     sorter = np.argsort(key)
@@ -256,7 +278,8 @@ def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.
         at = np.minimum(np.searchsorted(key, key + lag, sorter=sorter), max(key.size - 1, 0))
         partner = sorter[at] if key.size else at
         hit = key[partner] == key + lag if key.size else np.zeros(0, bool)
-        out.append((hit, partner))
+        out.append((hit, partner, partner.size > lag and np.array_equal(
+            partner[:-lag][hit[:-lag]], np.flatnonzero(hit[:-lag]) + lag)))
     return out
 
 

@@ -6,9 +6,10 @@ import copy
 import dataclasses
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, Sequence, cast
+from typing import Any, Sequence
 
 import numpy as np
+from scipy import sparse
 
 from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
@@ -62,6 +63,9 @@ class Memory:
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
+    weights: dict[tuple[Any, ...], Array] = field(default_factory=dict)
+    levels: dict[tuple[int, int], tuple[tuple[Key, ...], np.ndarray, np.ndarray]] = field(
+        default_factory=dict)                     # the cell levels among a replay's keys
 
 
 class Target:
@@ -158,11 +162,12 @@ class Target:
                 self.memory.layouts[key] = stationary.Layout(rec, self.block_lengths[i])
             lay = self.memory.layouts[key]
             used = rec.channels_used
-            x = rec.readings[:, used].astype(np.float64)
+            whole = used == list(range(rec.channels)) and rec.readings.flags.c_contiguous
+            x = (rec.readings if whole else rec.readings[:, used]).astype(np.float64, copy=False)
             total = lay.by_block if replicates else lay.by_stratum   # no bootstrap: strata
             b = stationary.blocks(rec, x, lay, total, converter.stationary_sums(
-                x, data.marks[:, used], lay.cell, lay.order, total))
-        s = bootstrap.resampled(b, replicates, seed)
+                x, data.marks if whole else data.marks[:, used], lay.cell, lay.order, total))
+        s = bootstrap.resampled(b, replicates, seed, self._weights(b, replicates, seed))
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
                 keys, cols = closedloop.stats(b, s, turns.with_stats(converter.loop_stats))
@@ -172,6 +177,15 @@ class Target:
                 keys, cols = keys + more_keys, cols + more_cols
         values = np.concatenate([c if c.ndim == 2 else c[:, None] for c in cols], axis=1)
         return Stats(tuple(keys), values)
+
+    def _weights(self, b: bootstrap.Blocks, replicates: int, seed: int) -> Array | None:
+        """The bootstrap weights of blocks like ``b``'s (every replay's), the last 8 kept."""
+        key, memo = (replicates, seed, b.edges.tobytes()), self.memory.weights
+        if replicates and key not in memo:
+            memo[key] = bootstrap.weights(b, replicates, np.random.default_rng(seed))
+            if len(memo) > 8:
+                memo.pop(next(iter(memo)))
+        return memo.get(key)
 
     def _simulated(self, effects: Sequence[Effect], replicates: int,
                    kinds: Sequence[str] | None,
@@ -192,10 +206,10 @@ class Target:
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
-        code, size, count, cells, cond, real_var, names = self._plan(i, sim, copies)
-        x = sim.readings[:, self.channels]
-        sums = [np.bincount(code, x[:, k], minlength=size) for k in range(x.shape[1])]
-        means = cast(Array, np.stack(sums, axis=1)).reshape(len(count), copies, x.shape[1])
+        by_unit, count, cells, cond, real_var, names = self._plan(i, sim, copies)
+        x = sim.readings if self.channels == list(range(sim.channels)) else \
+            sim.readings[:, self.channels]
+        means = np.asarray(by_unit @ x).reshape(len(count), copies, x.shape[1])
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
         spread = np.var(means, axis=1, ddof=1)[cells]
@@ -204,9 +218,13 @@ class Target:
         b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
         with np.errstate(invalid='ignore', divide='ignore'):
             ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
-        at = [j for j, k in enumerate(pooled.keys) if k.family == 'level']
-        of = [names.get(pooled.keys[j].condition, len(names)) for j in at]
-        factor[at] = np.r_[ratio, 1.0][of]
+        known = self.memory.levels.get((i, copies))
+        if known is None or known[0] != pooled.keys:       # the keys of most replays alike
+            at = [j for j, k in enumerate(pooled.keys) if k.family == 'level']
+            of = [names.get(pooled.keys[j].condition, len(names)) for j in at]
+            known = self.memory.levels[(i, copies)] = (pooled.keys, np.array(at, np.int64),
+                                                       np.array(of, np.int64))
+        factor[known[1]] = np.r_[ratio, 1.0][known[2]]
         return factor
 
     def _plan(self, i: int, sim: Recording, copies: int) -> tuple[Any, ...]:
@@ -227,9 +245,11 @@ class Target:
                         entries.append((c, k, names.setdefault(condition, len(names)),
                                         real.variance[j]))
             e = np.array(entries, np.float64).reshape(-1, 4)
+            by_unit = sparse.csr_matrix((np.ones(code.size), (code, np.arange(code.size))),
+                                        shape=(len(labels) * copies, code.size))   # sums by unit
             self.memory.plans[(i, copies)] = (
-                code, len(labels) * copies, count, (e[:, 0].astype(int), e[:, 1].astype(int)),
-                e[:, 2].astype(int), e[:, 3], names)
+                by_unit, count, (e[:, 0].astype(int), e[:, 1].astype(int)), e[:, 2].astype(int),
+                e[:, 3], names)
         return self.memory.plans[(i, copies)]
 
     # -- comparisons ----------------------------------------------------------------------
