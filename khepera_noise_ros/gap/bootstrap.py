@@ -72,13 +72,26 @@ def resampled(blocks: Blocks, replicates: int, seed: int, w: Array | None = None
     strata = len(blocks.strata)
     out = np.zeros((1 + replicates, strata, blocks.sums.shape[1]))
     lo, hi = blocks.edges[:-1], blocks.edges[1:]
-    used = hi > lo
-    if used.any():
-        out[0, used] = np.add.reduceat(blocks.sums, lo[used], axis=0)
-    if replicates:
-        w = weights(blocks, replicates, np.random.default_rng(seed)) if w is None else w
-        for s in np.flatnonzero(used):
+    w = weights(blocks, replicates, np.random.default_rng(seed)) if w is None else w
+    for s in np.flatnonzero(hi > lo):       # the sums of ``np.add.reduceat``, row by row
+        out[0, s] = blocks.sums[lo[s]] + _pairwise(blocks.sums[lo[s] + 1:hi[s]])
+        if replicates:
             out[1:, s] = w[1:, lo[s]:hi[s]] @ blocks.sums[lo[s]:hi[s]]
+    return out
+
+
+def _pairwise(rows: Array) -> Array:
+    """numpy's pairwise sum of ``rows`` (eight running sums to 128 rows, halves beyond):
+    the same numbers without its walk down each column of a wide table."""
+    n = len(rows)
+    if n > 128:
+        half = n // 2 - n // 2 % 8
+        return _pairwise(rows[:half]) + _pairwise(rows[half:])
+    m = n - n % 8
+    r = rows[:m].reshape(m // 8, 8, -1).sum(axis=0) if m else np.full((8, rows.shape[1]), -0.0)
+    out: Array = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7])) if m else r[0]
+    for row in rows[m:]:
+        out += row
     return out
 
 

@@ -154,36 +154,49 @@ def spread_cells(rows: Rows, level: dict[tuple[Any, ...], float], sensors: Seque
 
 # -- own wander ------------------------------------------------------------------------
 
+class Own:
+    """A recording's run residuals for ``parts``: the same whichever sensors share."""
+
+    def __init__(self, rec: Recording):
+        used = list(rec.channels_used)
+        self.n = len(used)
+        kept = [r[OWN_SKIP:] for r in runs(rec) if r.size >= OWN_RUN + OWN_SKIP]
+        self.sizes = sizes = np.array([r.size for r in kept], np.int64)
+        if not kept or self.n < 3:
+            return
+        self.starts = starts = np.r_[0, np.cumsum(sizes)[:-1]]
+        self.y = rec.readings[np.concatenate(kept)][:, used].astype(np.float64)
+        self.level = np.add.reduceat(self.y, starts, axis=0) / sizes[:, None]
+        self.y -= np.repeat(self.level, sizes, axis=0)
+        self.left = np.repeat(sizes, sizes) - (np.arange(len(self.y)) - np.repeat(starts, sizes))
+        self.run = np.repeat(np.arange(sizes.size), sizes)
+
+    def parts(self, shared_by: Sequence[int] | None = None) -> tuple[Array, ...]:
+        """Over runs: (runs, lags, sensors) autocorrelation of each sensor's own part,
+        (runs, sensors) its lag-1 autocovariance over the squared level, a usable mask.  The
+        shared part is the mean of the others among ``shared_by`` (positions; default all)."""
+        n, sizes = self.n, self.sizes
+        if not sizes.size or n < 3:
+            return np.empty((0, len(OWN_LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
+        ref = np.zeros(n, bool)
+        ref[list(range(n)) if shared_by is None else list(shared_by)] = True
+        starts, y, level, left = self.starts, self.y, self.level, self.left
+        e = own_part(y, ref, lambda v: np.add.reduceat(v, starts, axis=0), self.run)
+        den = np.add.reduceat(e * e, starts, axis=0)
+        good = (den > 0) & (level > MIN_LEVEL)
+        lagged = []
+        for k in OWN_LAGS:                  # products within a run only: partners k rows on
+            product = np.zeros_like(e)
+            np.multiply(e[:-k], e[k:], out=product[:-k], where=(left[:-k] > k)[:, None])
+            lagged.append(np.add.reduceat(product, starts, axis=0))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            a = np.stack(lagged, axis=1) / den[:, None, :]
+            c = lagged[0] / (sizes - 1)[:, None] / np.square(level)
+        return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
+
+
 def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[Array, ...]:
-    """Over runs: (runs, lags, sensors) autocorrelation of each sensor's own part,
-    (runs, sensors) its lag-1 autocovariance over the squared level, a usable mask.  The
-    shared part is the mean of the others among ``shared_by`` (positions; default all)."""
-    used = list(rec.channels_used)
-    n = len(used)
-    kept = [r[OWN_SKIP:] for r in runs(rec) if r.size >= OWN_RUN + OWN_SKIP]
-    if not kept or n < 3:
-        return np.empty((0, len(OWN_LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
-    ref = np.zeros(n, bool)
-    ref[list(range(n)) if shared_by is None else list(shared_by)] = True
-    sizes = np.array([r.size for r in kept])
-    starts = np.r_[0, np.cumsum(sizes)[:-1]]
-    y = rec.readings[np.concatenate(kept)][:, used].astype(np.float64)
-    level = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
-    y -= np.repeat(level, sizes, axis=0)
-    e = own_part(y, ref, lambda v: np.add.reduceat(v, starts, axis=0),
-                 np.repeat(np.arange(sizes.size), sizes))
-    den = np.add.reduceat(e * e, starts, axis=0)
-    good = (den > 0) & (level > MIN_LEVEL)
-    left = np.repeat(sizes, sizes) - (np.arange(y.shape[0]) - np.repeat(starts, sizes))
-    lagged = []
-    for k in OWN_LAGS:                  # products within a run only: partners k rows on
-        product = np.zeros_like(e)
-        np.multiply(e[:-k], e[k:], out=product[:-k], where=(left[:-k] > k)[:, None])
-        lagged.append(np.add.reduceat(product, starts, axis=0))
-    with np.errstate(invalid='ignore', divide='ignore'):
-        a = np.stack(lagged, axis=1) / den[:, None, :]
-        c = lagged[0] / (sizes - 1)[:, None] / np.square(level)
-    return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
+    return Own(rec).parts(shared_by)
 
 
 def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:

@@ -366,7 +366,7 @@ class TargetEvidence:
         real = t.of_kind('stationary')
         if not real:
             return {}
-        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        sim = [evidence.Own(r.recording) for r in t.simulate(kinds=('stationary',))]
 
         def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
             mine = []
@@ -374,7 +374,7 @@ class TargetEvidence:
                 if (i, shared_by) not in t.memory.own:
                     t.memory.own[(i, shared_by)] = evidence.own_parts(rec, shared_by)
                 mine.append(t.memory.own[(i, shared_by)])
-            return mine, [evidence.own_parts(rec, shared_by) for rec in sim]
+            return mine, [own.parts(shared_by) for own in sim]
         return evidence.wandering(parts, t.channels)
 
     def shared_change(self) -> dict[str, Any] | None:
