@@ -149,10 +149,18 @@ def _far(xt: Array, i: AnyArray, k: AnyArray, runs: Runs, far: AnyArray,
          d: Array) -> AnyArray:
     """``far`` less the readings within ``QUICK`` of the reach of a quick robust sd."""
     if far.any():
-        near = xt[k[far], runs.order[_neighbours(runs, WINDOW, i[far])]]
-        spread = 1.4826 * np.median(np.abs(near - np.median(near, axis=0)), axis=0)
+        near = xt[k[far], runs.order[_neighbours(runs, WINDOW, i[far])]].T
+        spread = 1.4826 * _median(np.abs(near - _median(near)[:, None]))
         far[far] = d[far] >= QUICK * SPREADS * spread
     return far
+
+
+def _median(x: Array) -> Array:
+    """``np.median(x, axis=1)`` by a sort of each short row (far quicker), NaN with one."""
+    x = np.sort(x, axis=1)                                      # NaN sorts last
+    n = x.shape[1]
+    out: Array = np.where(np.isnan(x[:, -1]), np.nan, (x[:, (n - 1) // 2] + x[:, n // 2]) / 2)
+    return out
 
 
 def _neighbours(runs: Runs, offsets: tuple[int, ...],
@@ -204,11 +212,10 @@ def _detached(col: Array, end: int) -> bool:
     x = col if np.isfinite(col).all() else col[np.isfinite(col)]
     x = x if end == 0 else -x
     low = x.min()
-    above = x > low
-    if np.count_nonzero(above) < SPACINGS + 1 or x.min(where=above, initial=np.inf) - low < AWAY \
+    rest = x[x > low]
+    if rest.size < SPACINGS + 1 or rest.min() - low < AWAY \
             or np.count_nonzero(x == low) < DETACHED_HITS:
         return False
-    rest = x[above]
     m = min(rest.size, 64 * (SPACINGS + 1))     # the distinct values among the nearest m
     near = np.unique(np.partition(rest, m - 1)[:m])[:SPACINGS + 1]
     if near.size < 3:
