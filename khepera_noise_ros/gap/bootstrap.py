@@ -72,10 +72,15 @@ def resampled(blocks: Blocks, replicates: int, seed: int, w: Array | None = None
     strata = len(blocks.strata)
     out = np.zeros((1 + replicates, strata, blocks.sums.shape[1]))
     lo, hi = blocks.edges[:-1], blocks.edges[1:]
-    w = weights(blocks, replicates, np.random.default_rng(seed)) if w is None else w
-    for s in np.flatnonzero(hi > lo):       # the sums of ``np.add.reduceat``, row by row
-        out[0, s] = blocks.sums[lo[s]] + _pairwise(blocks.sums[lo[s] + 1:hi[s]])
-        if replicates:
+    used = np.flatnonzero(hi > lo)
+    if used.size == len(blocks.sums):           # a block per stratum: its sums
+        out[0, used] = blocks.sums
+    else:                                       # ``np.add.reduceat``'s sums, row by row
+        for s in used:
+            out[0, s] = blocks.sums[lo[s]] + _pairwise(blocks.sums[lo[s] + 1:hi[s]])
+    if replicates:
+        w = weights(blocks, replicates, np.random.default_rng(seed)) if w is None else w
+        for s in used:
             out[1:, s] = w[1:, lo[s]:hi[s]] @ blocks.sums[lo[s]:hi[s]]
     return out
 
