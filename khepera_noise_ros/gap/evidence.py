@@ -7,14 +7,15 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy import stats as sps
 
-from ..effects.base import Array, Row
+from ..effects.base import AnyArray, Array, Row
 from ..effects.fitting import ALPHA, holm
 from ..recording import Recording
 from .protocol import runs
 from .stationary import own_part
 
 Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
-Parts = list[tuple[Array, ...]]       # own_parts of several recordings
+Parts = list[tuple[AnyArray, ...]]     # own_parts of several recordings
+Cuts = Sequence[list[np.ndarray]]     # each recording's ``runs``, where known
 WINDOW = 8                    # samples averaged into one value of the slow part
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
                 'loop_change_correlation')
@@ -26,13 +27,14 @@ CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
 
 # -- groups ----------------------------------------------------------------------------
 
-def part_sums(recs: Sequence[Recording], part: str) -> dict[str, list[Any]]:
+def part_sums(recs: Sequence[Recording], part: str,
+              cuts: Cuts | None = None) -> dict[str, list[Any]]:
     """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
     residuals, pooled over ``recs``."""
     out: dict[str, list[Any]] = {}
-    for rec in recs:
+    for rec, cut in zip(recs, cuts or [runs(rec) for rec in recs]):
         mine: dict[str, list[Any]] = {}
-        for r in runs(rec):
+        for r in cut:
             y = rec.readings[r][:, list(rec.channels_used)].astype(np.float64)
             if part == 'fast':
                 d = np.diff(y, axis=0)
@@ -56,11 +58,11 @@ def _add(sums: dict[Any, list[Any]], cell: Any, s: Array, n: int) -> None:
 
 
 def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
-                  part: str) -> Array:
+                  part: str, cuts: tuple[Cuts | None, Cuts | None] = (None, None)) -> Array:
     """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
     conditions (0 on the diagonal)."""
     zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))
-    pooled = [part_sums(recs, part) for recs in (real, sim)]
+    pooled = [part_sums(recs, part, c) for recs, c in zip((real, sim), cuts)]
     for cond, (sr, nr) in pooled[0].items():
         if cond not in pooled[1] or nr < 8:
             continue
@@ -157,10 +159,11 @@ def spread_cells(rows: Rows, level: dict[tuple[Any, ...], float], sensors: Seque
 class Own:
     """A recording's run residuals for ``parts``: the same whichever sensors share."""
 
-    def __init__(self, rec: Recording):
+    def __init__(self, rec: Recording, cut: list[np.ndarray] | None = None):
         used = list(rec.channels_used)
         self.n = len(used)
-        kept = [r[OWN_SKIP:] for r in runs(rec) if r.size >= OWN_RUN + OWN_SKIP]
+        kept = [r[OWN_SKIP:] for r in (runs(rec) if cut is None else cut)
+                if r.size >= OWN_RUN + OWN_SKIP]
         self.sizes = sizes = np.array([r.size for r in kept], np.int64)
         if not kept or self.n < 3:
             return
@@ -171,7 +174,7 @@ class Own:
         self.left = np.repeat(sizes, sizes) - (np.arange(len(self.y)) - np.repeat(starts, sizes))
         self.run = np.repeat(np.arange(sizes.size), sizes)
 
-    def parts(self, shared_by: Sequence[int] | None = None) -> tuple[Array, ...]:
+    def parts(self, shared_by: Sequence[int] | None = None) -> tuple[AnyArray, ...]:
         """Over runs: (runs, lags, sensors) autocorrelation of each sensor's own part,
         (runs, sensors) its lag-1 autocovariance over the squared level, a usable mask.  The
         shared part is the mean of the others among ``shared_by`` (positions; default all)."""
@@ -195,7 +198,7 @@ class Own:
         return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
 
 
-def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[Array, ...]:
+def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[AnyArray, ...]:
     return Own(rec).parts(shared_by)
 
 
@@ -250,10 +253,11 @@ def _cell(rec: Recording, r: np.ndarray) -> tuple[str, float]:
     return str(rec.condition[r[0]]), float(np.round(rec.heading_deg[r[0]], 1))
 
 
-def _factors(rec: Recording, reference: dict[Any, Array], sensors: list[int]) -> list[Any]:
+def _factors(rec: Recording, cut: list[np.ndarray], reference: dict[Any, Array],
+             sensors: list[int]) -> list[Any]:
     """[(run, cell, run means, simulated levels, white variance of the run means)]."""
     out = []
-    for r in runs(rec):
+    for r in cut:
         ref = reference.get(_cell(rec, r))
         if ref is None or r.size < 2:
             continue
@@ -288,19 +292,21 @@ def _shared(rows: list[Any], rounds: int = 3) -> Array:
     return factor
 
 
-def shared_change(real: Sequence[Recording], sim: Sequence[Recording],
-                  sensors: list[int]) -> dict[str, Any] | None:
+def shared_change(real: Sequence[Recording], sim: Sequence[Recording], sensors: list[int],
+                  cuts: tuple[Cuts | None, Cuts | None] = (None, None)) -> dict[str, Any] | None:
     """{p_value, ratio, excess_sd, significant, runs: [(run, factor)] per real recording,
     sd} of a change over time shared by the sensors, or None with no way to tell."""
     if not real or not sim:
         return None
+    real_cuts, sim_cuts = (c or [runs(rec) for rec in recs] for recs, c in zip((real, sim), cuts))
     acc: dict[Any, list[Array]] = {}
-    for rec in sim:
-        for r in runs(rec):
+    for rec, cut in zip(sim, sim_cuts):
+        for r in cut:
             acc.setdefault(_cell(rec, r), []).append(rec.readings[r][:, sensors])
     reference = {cell: np.concatenate(v).mean(axis=0) for cell, v in acc.items()}
-    rows_real = [_factors(rec, reference, sensors) for rec in real]
-    rows_sim = [row for rec in sim for row in _factors(rec, reference, sensors)]
+    rows_real = [_factors(rec, cut, reference, sensors) for rec, cut in zip(real, real_cuts)]
+    rows_sim = [row for rec, cut in zip(sim, sim_cuts)
+                for row in _factors(rec, cut, reference, sensors)]
     flat = [row for rows in rows_real for row in rows]
     if len(flat) < 3 or len(rows_sim) < 3:
         return None

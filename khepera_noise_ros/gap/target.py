@@ -62,6 +62,7 @@ class Memory:
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     pairs: dict[tuple[Any, ...], tuple[AnyArray, AnyArray, Array]] = field(default_factory=dict)
     runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
+    cuts: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)   # ``runs``
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
     weights: dict[tuple[Any, ...], Array] = field(default_factory=dict)
     levels: dict[tuple[int, int], tuple[tuple[Key, ...], np.ndarray, np.ndarray]] = field(
@@ -139,6 +140,13 @@ class Target:
                 memo.move_to_end(key)
             out.append(hit)
         return out
+
+    def cut(self, i: int, rec: Recording, copies: int = 0) -> list[np.ndarray]:
+        """``runs`` of recording ``i`` (``copies`` 0) or of its replays of ``copies`` copies
+        (their index columns alike), made once."""
+        if (i, copies) not in self.memory.cuts:
+            self.memory.cuts[(i, copies)] = runs(rec)
+        return self.memory.cuts[(i, copies)]
 
     def _replayer(self, i: int) -> Replayer:
         key = (i, self.config)
@@ -346,7 +354,8 @@ class TargetEvidence:
         if not real:
             return evidence.loop_group_evidence(self.rows, t.channels, part)
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-        return evidence.part_evidence(real, sim, len(t.channels), part)
+        return evidence.part_evidence(real, sim, len(t.channels), part,
+                                      (self._cuts(real), self._cuts(sim, t.copies)))
 
     def group_null(self, part: str) -> Array:
         t = self.target
@@ -355,10 +364,13 @@ class TargetEvidence:
         key = ('null', part, t.seed, t.config, t.given)
         if key not in t.memory.nulls:
             sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-            t.memory.nulls[key] = np.stack([evidence.part_evidence(
-                [r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
-                    kinds=('stationary',), copies=1, remember=False)], sim, len(t.channels), part)
-                for k in range(NULL_DRAWS)])
+            draws = []
+            for k in range(NULL_DRAWS):
+                null = [r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
+                    kinds=('stationary',), copies=1, remember=False)]
+                draws.append(evidence.part_evidence(null, sim, len(t.channels), part, (
+                    self._cuts(null, 1), self._cuts(sim, t.copies))))
+            t.memory.nulls[key] = np.stack(draws)
         return t.memory.nulls[key]
 
     def own_wander(self) -> dict[int, dict[str, Any]]:
@@ -366,7 +378,8 @@ class TargetEvidence:
         real = t.of_kind('stationary')
         if not real:
             return {}
-        sim = [evidence.Own(r.recording) for r in t.simulate(kinds=('stationary',))]
+        replays = [r.recording for r in t.simulate(kinds=('stationary',))]
+        sim = [evidence.Own(r, c) for r, c in zip(replays, self._cuts(replays, t.copies))]
 
         def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
             mine = []
@@ -383,7 +396,8 @@ class TargetEvidence:
         if t.base == 'observed' or not real:
             return None
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-        return evidence.shared_change(real, sim, t.channels)
+        return evidence.shared_change(real, sim, t.channels,
+                                      (self._cuts(real), self._cuts(sim, t.copies)))
 
     def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]:
         return evidence.steady_rows(rows, self.target.of_kind('stationary'), change)
@@ -423,5 +437,11 @@ class TargetEvidence:
         t = self.target
         recs = [r.recording for r in t.simulate(kinds=('stationary',))] if simulated \
             else t.of_kind('stationary')
-        return [rec.readings[r][:, t.channels].astype(np.float64) for rec in recs
-                for r in runs(rec)]
+        return [rec.readings[r][:, t.channels].astype(np.float64)
+                for rec, cut in zip(recs, self._cuts(recs, t.copies if simulated else 0))
+                for r in cut]
+
+    def _cuts(self, recs: Sequence[Recording], copies: int = 0) -> list[list[np.ndarray]]:
+        """The runs of the stationary recordings (``copies`` 0) or of their replays."""
+        t = self.target
+        return [t.cut(i, rec, copies) for i, rec in zip(t._chosen(('stationary',)), recs)]
