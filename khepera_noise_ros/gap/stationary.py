@@ -78,8 +78,11 @@ class Grouping:
         length = np.diff(np.r_[first, group.size])
         self.segments = [(int(g), slice(a, a + n)) for g, a, n in zip(self.first_group, first,
                                                                       length)]
-        # short groups (blocks): per position, the groups that have a sample there and it
-        self.steps = [(self.first_group[length > k], first[length > k] + k)
+        # short groups (blocks): per position, the groups that have a sample there (all of
+        # them in order: a slice, no scatter) and it
+        whole = np.array_equal(self.first_group, np.arange(size))
+        self.steps = [(slice(None) if whole and (length > k).all() else
+                       self.first_group[length > k], first[length > k] + k)
                       for k in range(int(length.max()))] \
             if self.contiguous and first.size and length.max() <= 16 else None
 
