@@ -91,6 +91,7 @@ class Target:
                       for i, r in enumerate(self.real_data)]
         self.real = Stats.join(self._real)
         self.channels = list(self.recordings[0].channels_used)
+        self.counts = dropouts.counts(self.real_data)
 
     def with_given(self, effects: Sequence[Effect]) -> 'Target':
         """This target with ``effects`` always in the simulator: a candidate fitted against
@@ -269,7 +270,7 @@ class Target:
         c = compare(self.real, sim, factor)
         if not any(FAMILIES[k.family].counted for k in c.keys):
             return c
-        real, own = dropouts.counts(self.real_data), dropouts.counts(self.simulate(effects))
+        real, own = self.counts, dropouts.counts(self.simulate(effects))
         k = dropouts.count_copies(sum(len(r) for r in self.recordings), self.copies)
         if k == self.copies or not dropouts.undecided(real, own):
             return recount(c, real, own)
