@@ -145,8 +145,7 @@ def _local_finite(xt: Array, i: AnyArray, group: AnyArray, ends: Array,
     return _far(xt, i, k, runs, alone & (d >= STEADY * rough), d), lower, d, alone
 
 
-def _far(xt: Array, i: AnyArray, k: AnyArray, runs: Runs, far: AnyArray,
-         d: Array) -> AnyArray:
+def _far(xt: Array, i: AnyArray, k: AnyArray, runs: Runs, far: AnyArray, d: Array) -> AnyArray:
     """``far`` less the readings within ``QUICK`` of the reach of a quick robust sd."""
     if far.any():
         near = xt[k[far], runs.order[_neighbours(runs, WINDOW, i[far])]].T
@@ -163,8 +162,7 @@ def _median(x: Array) -> Array:
     return out
 
 
-def _neighbours(runs: Runs, offsets: tuple[int, ...],
-                at: np.ndarray | None = None) -> np.ndarray:
+def _neighbours(runs: Runs, offsets: tuple[int, ...], at: np.ndarray | None = None) -> np.ndarray:
     """(offsets, N) each position's neighbours in its run (reflected at its ends)."""
     at = np.arange(runs.run_of.size) if at is None else at
     start, n = runs.first[runs.run_of[at]], runs.sizes[runs.run_of[at]]

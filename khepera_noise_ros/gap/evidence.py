@@ -17,8 +17,7 @@ Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
 Parts = list[tuple[AnyArray, ...]]     # own_parts of several recordings
 Cuts = Sequence[list[np.ndarray]]     # each recording's ``runs``, where known
 WINDOW = 8                    # samples averaged into one value of the slow part
-CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation',
-                'loop_change_correlation')
+CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation', 'loop_change_correlation')
 LOOP_SPREADS = ('loop_still_spread', 'loop_residual_spread', 'loop_change_spread')
 OWN_LAGS, OWN_SKIP, OWN_RUN = (1, 3, 10), 3, 24
 MIN_LEVEL = 20.0              # readings; darker cells carry no usable ratio or own part
@@ -120,8 +119,7 @@ def correlation_evidence(keys: Sequence[Any], estimate: Array, se: Array,
     """(C, C) z of correlations against zero (real data alone), Stouffer over conditions."""
     return combined([(k.sensors, v / s if s > 0 else 0.0)
                      for k, v, s in zip(keys, estimate, se)
-                     if k.family == 'correlation' and np.isfinite(v) and np.isfinite(s)],
-                    channels)
+                     if k.family == 'correlation' and np.isfinite(v) and np.isfinite(s)], channels)
 
 
 # -- spreads ---------------------------------------------------------------------------

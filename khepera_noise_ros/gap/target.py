@@ -142,12 +142,13 @@ class Target:
             out.append(hit)
         return out
 
-    def cut(self, i: int, rec: Recording, copies: int = 0) -> list[np.ndarray]:
-        """``runs`` of recording ``i`` (``copies`` 0) or of its replays of ``copies`` copies
-        (their index columns alike), made once."""
-        if (i, copies) not in self.memory.cuts:
-            self.memory.cuts[(i, copies)] = runs(rec)
-        return self.memory.cuts[(i, copies)]
+    def cut(self, i: int, rec: Recording) -> list[np.ndarray]:
+        """``runs`` of recording ``i`` or a replay of it, made once: the same for every replay
+        of as many copies (one copy: the recording's own index columns)."""
+        key = (i, len(rec) // len(self.recordings[i]))
+        if key not in self.memory.cuts:
+            self.memory.cuts[key] = runs(rec)
+        return self.memory.cuts[key]
 
     def _replayer(self, i: int) -> Replayer:
         key = (i, self.config)
@@ -196,8 +197,7 @@ class Target:
                 memo.pop(next(iter(memo)))
         return memo.get(key)
 
-    def _simulated(self, effects: Sequence[Effect], replicates: int,
-                   kinds: Sequence[str] | None,
+    def _simulated(self, effects: Sequence[Effect], replicates: int, kinds: Sequence[str] | None,
                    copies: int | None = None) -> tuple[Stats, Array]:
         """Simulated statistics of all copies together, and each one's ``_inflation``."""
         copies = self.copies if copies is None else copies
@@ -356,7 +356,7 @@ class TargetEvidence:
             return evidence.loop_group_evidence(self.rows, t.channels, part)
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
         return evidence.part_evidence(real, sim, len(t.channels), part,
-                                      (self._cuts(real), self._cuts(sim, t.copies)))
+                                      (self._cuts(real), self._cuts(sim)))
 
     def group_null(self, part: str) -> Array:
         t = self.target
@@ -365,13 +365,11 @@ class TargetEvidence:
         key = ('null', part, t.seed, t.config, t.given)
         if key not in t.memory.nulls:
             sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-            draws = []
-            for k in range(NULL_DRAWS):
-                null = [r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
-                    kinds=('stationary',), copies=1, remember=False)]
-                draws.append(evidence.part_evidence(null, sim, len(t.channels), part, (
-                    self._cuts(null, 1), self._cuts(sim, t.copies))))
-            t.memory.nulls[key] = np.stack(draws)
+            t.memory.nulls[key] = np.stack([evidence.part_evidence(
+                null, sim, len(t.channels), part, (self._cuts(null), self._cuts(sim)))
+                for null in ([r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1))
+                              .simulate(kinds=('stationary',), copies=1, remember=False)]
+                             for k in range(NULL_DRAWS))])
         return t.memory.nulls[key]
 
     def own_wander(self) -> dict[int, dict[str, Any]]:
@@ -380,7 +378,7 @@ class TargetEvidence:
         if not real:
             return {}
         replays = [r.recording for r in t.simulate(kinds=('stationary',))]
-        sim = [evidence.Own(r, c) for r, c in zip(replays, self._cuts(replays, t.copies))]
+        sim = [evidence.Own(r, c) for r, c in zip(replays, self._cuts(replays))]
 
         def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
             mine = []
@@ -397,8 +395,7 @@ class TargetEvidence:
         if t.base == 'observed' or not real:
             return None
         sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-        return evidence.shared_change(real, sim, t.channels,
-                                      (self._cuts(real), self._cuts(sim, t.copies)))
+        return evidence.shared_change(real, sim, t.channels, (self._cuts(real), self._cuts(sim)))
 
     def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]:
         return evidence.steady_rows(rows, self.target.of_kind('stationary'), change)
@@ -439,10 +436,9 @@ class TargetEvidence:
         recs = [r.recording for r in t.simulate(kinds=('stationary',))] if simulated \
             else t.of_kind('stationary')
         return [rec.readings[r][:, t.channels].astype(np.float64)
-                for rec, cut in zip(recs, self._cuts(recs, t.copies if simulated else 0))
-                for r in cut]
+                for rec, cut in zip(recs, self._cuts(recs)) for r in cut]
 
-    def _cuts(self, recs: Sequence[Recording], copies: int = 0) -> list[list[np.ndarray]]:
-        """The runs of the stationary recordings (``copies`` 0) or of their replays."""
+    def _cuts(self, recs: Sequence[Recording]) -> list[list[np.ndarray]]:
+        """The runs of the stationary recordings or of their replays."""
         t = self.target
-        return [t.cut(i, rec, copies) for i, rec in zip(t._chosen(('stationary',)), recs)]
+        return [t.cut(i, rec) for i, rec in zip(t._chosen(('stationary',)), recs)]
