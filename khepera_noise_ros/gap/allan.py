@@ -13,8 +13,7 @@ from .protocol import runs as run_indices
 SLOPES = {'white': -0.5, 'flicker': 0.0, 'random_walk': 0.5, 'drift': 1.0}
 
 
-def deviation(series: Iterable[Array], factors: Sequence[int],
-              width: int) -> tuple[Array, Array]:
+def deviation(series: Iterable[Array], factors: Sequence[int], width: int) -> tuple[Array, Array]:
     """(overlapping Allan deviation (factors, width) of the (N, width) rate series pooled,
     terms per factor): with the phase x = cumsum(y) (a leading 0), sigma^2(m) =
     sum (x[i+2m] - 2 x[i+m] + x[i])^2 / (2 m^2 terms); NaN with no terms."""

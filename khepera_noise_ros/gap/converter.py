@@ -150,8 +150,7 @@ def stationary_stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Arr
 
 
 @functools.lru_cache(maxsize=64)
-def _stationary_keys(ch: tuple[int, ...], conditions: tuple[str, ...],
-                     lattice: bool) -> list[Key]:
+def _stationary_keys(ch: tuple[int, ...], conditions: tuple[str, ...], lattice: bool) -> list[Key]:
     out = [Key('pileup', (k,), None, end) for k in ch for end in PILE_ENDS]
     out += share_keys('dropout', ch, None)
     if lattice:

@@ -435,8 +435,7 @@ def _allan(full: Target) -> dict[str, Any] | None:
         return None
     sim = full.simulate(kinds=('stationary',), copies=1)
     factors = allan.taus(max(r.size for r in runs(real[0])))
-    return allan.compare(allan.profile(real[0], factors),
-                         allan.profile(sim[0].recording, factors))
+    return allan.compare(allan.profile(real[0], factors), allan.profile(sim[0].recording, factors))
 
 
 def _base_notes(recordings: Sequence[Recording], requested: str) -> list[str]:

@@ -117,8 +117,7 @@ def loop_group_evidence(rows: Rows, channels: Sequence[int], part: str) -> Array
 def correlation_evidence(keys: Sequence[Any], estimate: Array, se: Array,
                          channels: Sequence[int]) -> Array:
     """(C, C) z of correlations against zero (real data alone), Stouffer over conditions."""
-    return combined([(k.sensors, v / s if s > 0 else 0.0)
-                     for k, v, s in zip(keys, estimate, se)
+    return combined([(k.sensors, v / s if s > 0 else 0.0) for k, v, s in zip(keys, estimate, se)
                      if k.family == 'correlation' and np.isfinite(v) and np.isfinite(s)], channels)
 
 

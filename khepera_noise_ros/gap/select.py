@@ -393,8 +393,7 @@ def _local_gains(before: Comparison, current: Comparison,
         max([0.0] + [(d1 - d2) / d1 for _, d1, d2, limit in d if d1 > limit])
 
 
-def _family_gain(b: Target, before: Comparison, current: Comparison,
-                 after: Comparison) -> float:
+def _family_gain(b: Target, before: Comparison, current: Comparison, after: Comparison) -> float:
     """The largest share a step removes of one family's held-out discrepancy before any
     effect, where the fall is significant on the family's replicates (a dominant effect
     makes most of a part; a drift beside it acts on other families)."""

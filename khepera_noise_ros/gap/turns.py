@@ -146,8 +146,7 @@ def sums(rec: Recording, x: Array, every: int, more: Callable[..., dict[str, Any
     return lambda order, ep, m: {**more(order, ep, m), **loop_sums(rec, x, order, ep, m, every)}
 
 
-def measured(loops: Sequence[Recording], sweeps: Sequence[Recording],
-             config: Any) -> Array:
+def measured(loops: Sequence[Recording], sweeps: Sequence[Recording], config: Any) -> Array:
     """(n, 2) commanded and made turns, degrees (+ to the right): from consecutive
     headings where they are known, else (lone turns of a calibration) from the settled
     readings after the turn through a sweep of the same condition."""
