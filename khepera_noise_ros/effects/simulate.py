@@ -20,6 +20,7 @@ from ..core.khepera import DARK, SENSOR_ANGLES_DEG, SENSORS, TENTHS, World, to_t
 from ..core.noise import NoiseModel
 from ..core.streams import UNIT
 from ..core.task import Episodes, Task
+from ..memo import Recent
 from .base import AnyArray, Array, Effect, Stage, Step
 
 
@@ -69,8 +70,8 @@ class EffectEpisodes(Episodes):
         if staged(self.effects, Stage.WORLD):
             self._table = np.ascontiguousarray(
                 light_table(world, self.effects, True).astype(np.float32).T)
-            setattr(self, '_levels', np.ascontiguousarray(
-                light_table(world, self.effects).astype(np.float32).T))
+            self._levels = np.ascontiguousarray(
+                light_table(world, self.effects).astype(np.float32).T)
 
     @property
     def task(self) -> Task:
@@ -258,21 +259,18 @@ class SimCache:
     on the effects) and the light levels of a read-only base, both read-only."""
 
     def __init__(self) -> None:
-        self._model: dict[tuple[int, ...], AnyArray] = {}
+        self._model: Recent[tuple[int, ...], AnyArray] = Recent(8)
         self._levels: list[tuple[Array, bool, AnyArray]] = []
 
     def model_draws(self, seed: int, samples: int, rows: int, robots: int) -> AnyArray:
         """The model's noise draws, (rows, samples x robots)."""
-        key = (seed, samples, rows, robots)
-        if key not in self._model:
+        def make() -> AnyArray:
             draws = np.random.default_rng([seed, 0x5A7]).integers(
                 0, int(UNIT) + 1, size=(samples, rows, robots), dtype=np.uint16)
             out = np.ascontiguousarray(draws.transpose(1, 0, 2)).reshape(rows, -1)
             out.flags.writeable = False
-            if len(self._model) >= 8:
-                self._model.pop(next(iter(self._model)))
-            self._model[key] = out
-        return self._model[key]
+            return out
+        return self._model.recall((seed, samples, rows, robots), make)
 
     def levels(self, base: Array, rounded: bool) -> AnyArray:
         """``levels`` of ``base``, made once where ``base`` is read-only (a replay's light)."""

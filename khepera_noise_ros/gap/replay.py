@@ -13,6 +13,7 @@ from ..core.noise import NoiseModel
 from ..effects import Effect, Stage
 from ..effects.base import Array
 from ..effects.simulate import EffectEpisodes, SimCache, light_table, staged, stationary
+from ..memo import Recent
 from ..recording import Recording
 from .protocol import (ProtocolError, base_mode, calibrating, condition_world, genome_of, kind,
                        runs)
@@ -29,8 +30,9 @@ class Replayer:
         self.rec, self.config, self.kind = rec, config, kind(rec)
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
         self.cache = cache if cache is not None else SimCache()
-        self._light: dict[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = {}
-        self._copies: dict[tuple[Any, ...], tuple[Array, np.ndarray, dict[str, Any]]] = {}
+        self._light: Recent[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = Recent(8)
+        self._copies: Recent[tuple[Any, ...], tuple[Array, np.ndarray, dict[str, Any]]] = \
+            Recent(8)
 
     def replay(self, effects: Sequence[Effect] = (), seed: int = 0, copies: int = 1) -> Recording:
         effects = tuple(self.config.effects) + tuple(effects)
@@ -48,11 +50,7 @@ class Replayer:
     def light(self, shaped: tuple[Effect, ...] = ()) -> tuple[Array, NoiseModel, float]:
         """(samples, channels, episodes) light of every step, the noise model, the scale,
         in the world the world-stage effects ``shaped`` make."""
-        if shaped not in self._light:
-            if len(self._light) >= 8:
-                self._light.pop(next(iter(self._light)))
-            self._light[shaped] = self._make_light(shaped)
-        return self._light[shaped]
+        return self._light.recall(shaped, lambda: self._make_light(shaped))
 
     def _make_light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
         rec, config = self.rec, self.config
@@ -78,27 +76,26 @@ class Replayer:
                ) -> tuple[Array, np.ndarray, dict[str, Any]]:
         """(the light of ``copies`` copies side by side, read-only; per replayed sample its
         step and column as a row of the light's (step, column) rows; the index columns)."""
-        key = (copies, shaped)
-        if key not in self._copies:
-            if len(self._copies) >= 8:
-                self._copies.pop(next(iter(self._copies)))
-            rec = self.rec
-            episodes_, column = np.unique(rec.episode, return_inverse=True)
-            tiled = np.tile(self.light(shaped)[0], (1, 1, copies))
-            tiled.flags.writeable = False
-            span = int(rec.episode.max()) + 1
-            index = {'episode': np.concatenate([rec.episode + k * span for k in range(copies)]),
-                     'step': np.tile(rec.step, copies),
-                     'heading_deg': np.tile(rec.heading_deg, copies),
-                     'condition': np.tile(rec.condition, copies),
-                     'direction': np.full(len(rec) * copies, np.nan),
-                     'power': np.full(len(rec) * copies, np.nan)}
-            for value in index.values():
-                value.flags.writeable = False
-            at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
-                [column + k * episodes_.size for k in range(copies)])
-            self._copies[key] = (tiled, at, index)
-        return self._copies[key]
+        return self._copies.recall((copies, shaped), lambda: self._tiled(copies, shaped))
+
+    def _tiled(self, copies: int, shaped: tuple[Effect, ...]
+               ) -> tuple[Array, np.ndarray, dict[str, Any]]:
+        rec = self.rec
+        episodes_, column = np.unique(rec.episode, return_inverse=True)
+        tiled = np.tile(self.light(shaped)[0], (1, 1, copies))
+        tiled.flags.writeable = False
+        span = int(rec.episode.max()) + 1
+        index = {'episode': np.concatenate([rec.episode + k * span for k in range(copies)]),
+                 'step': np.tile(rec.step, copies),
+                 'heading_deg': np.tile(rec.heading_deg, copies),
+                 'condition': np.tile(rec.condition, copies),
+                 'direction': np.full(len(rec) * copies, np.nan),
+                 'power': np.full(len(rec) * copies, np.nan)}
+        for value in index.values():
+            value.flags.writeable = False
+        at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
+            [column + k * episodes_.size for k in range(copies)])
+        return tiled, at, index
 
     def _manifest(self) -> dict[str, Any]:
         manifest = {k: v for k, v in self.rec.manifest.items()

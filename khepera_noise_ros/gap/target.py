@@ -3,8 +3,8 @@ their caches in one ``Memory``, and the ``Evidence`` a fitter sees."""
 from __future__ import annotations
 
 import copy
+import functools
 import dataclasses
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -14,6 +14,7 @@ from scipy import sparse
 from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
+from ..memo import Recent
 from ..recording import Recording
 from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turns
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
@@ -54,7 +55,7 @@ class Memory:
 
     cache: SimCache = field(default_factory=SimCache)
     replayers: dict[tuple[int, SimConfig], Replayer] = field(default_factory=dict)
-    replays: OrderedDict[tuple[Any, ...], Repaired] = field(default_factory=OrderedDict)
+    replays: Recent[tuple[Any, ...], Repaired] = field(default_factory=lambda: Recent(REPLAYS))
     layouts: dict[tuple[int, int], stationary.Layout] = field(default_factory=dict)
     objectives: dict[tuple[Any, ...], float] = field(default_factory=dict)
     own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
@@ -64,7 +65,7 @@ class Memory:
     runs: dict[tuple[int, int], dropouts.Runs] = field(default_factory=dict)
     cuts: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)   # ``runs``
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
-    weights: dict[tuple[Any, ...], Array] = field(default_factory=dict)
+    weights: Recent[tuple[Any, ...], Array] = field(default_factory=lambda: Recent(8))
     levels: dict[tuple[int, int], tuple[tuple[Key, ...], np.ndarray, np.ndarray]] = field(
         default_factory=dict)                     # the cell levels among a replay's keys
 
@@ -125,22 +126,17 @@ class Target:
         out = []
         for i in self._chosen(kinds):
             key = (i, self.config, effects, self.seed + 7919 * i, copies, self.base)
-            memo = self.memory.replays
-            hit = memo.get(key) if remember else None
-            if hit is None:
-                sim = self._replayer(i).replay(effects, self.seed + 7919 * i, copies)
-                if (i, copies) not in self.memory.runs:       # the same for every replay
-                    self.memory.runs[(i, copies)] = dropouts.Runs(episodes(sim), len(sim))
-                hit = Repaired.of(sim, self.memory.runs[(i, copies)])
-                hit.recording.readings.flags.writeable = False
-                if remember:
-                    memo[key] = hit
-                    if len(memo) > REPLAYS:
-                        memo.popitem(last=False)
-            else:
-                memo.move_to_end(key)
-            out.append(hit)
+            make = functools.partial(self._replay, i, effects, copies)
+            out.append(self.memory.replays.recall(key, make) if remember else make())
         return out
+
+    def _replay(self, i: int, effects: tuple[Effect, ...], copies: int) -> Repaired:
+        sim = self._replayer(i).replay(effects, self.seed + 7919 * i, copies)
+        if (i, copies) not in self.memory.runs:       # the same for every replay
+            self.memory.runs[(i, copies)] = dropouts.Runs(episodes(sim), len(sim))
+        hit = Repaired.of(sim, self.memory.runs[(i, copies)])
+        hit.recording.readings.flags.writeable = False
+        return hit
 
     def cut(self, i: int, rec: Recording) -> list[np.ndarray]:
         """``runs`` of recording ``i`` or a replay of it, made once: the same for every replay
@@ -190,12 +186,10 @@ class Target:
 
     def _weights(self, b: bootstrap.Blocks, replicates: int, seed: int) -> Array | None:
         """The bootstrap weights of blocks like ``b``'s (every replay's), the last 8 kept."""
-        key, memo = (replicates, seed, b.edges.tobytes()), self.memory.weights
-        if replicates and key not in memo:
-            memo[key] = bootstrap.weights(b, replicates, np.random.default_rng(seed))
-            if len(memo) > 8:
-                memo.pop(next(iter(memo)))
-        return memo.get(key)
+        if not replicates:
+            return None
+        return self.memory.weights.recall((replicates, seed, b.edges.tobytes()), lambda: (
+            bootstrap.weights(b, replicates, np.random.default_rng(seed))))
 
     def _simulated(self, effects: Sequence[Effect], replicates: int, kinds: Sequence[str] | None,
                    copies: int | None = None) -> tuple[Stats, Array]:

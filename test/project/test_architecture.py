@@ -13,7 +13,7 @@ MAX_LINES = 500
 
 # Lower layers never import higher ones; a module may import its own layer or below.
 LAYERS = (
-    ('files', 'lifeline', 'core'),                          # plain utilities and the paper's model
+    ('files', 'lifeline', 'memo', 'core'),                  # plain utilities and the paper's model
     ('effects', 'simconfig', 'recording', 'bag', 'convert', 'reality'),   # effects, data, worlds
     ('gap', 'synchrony'),                                   # analyses of recordings
     ('nodes', 'experiment'),                         # ROS adapters, the experiments

@@ -9,7 +9,7 @@ import sys
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ['khepera_noise_ros/core', 'khepera_noise_ros/effects', 'khepera_noise_ros/gap',
             'khepera_noise_ros/recording', 'khepera_noise_ros/files.py',
-            'khepera_noise_ros/simconfig.py']
+            'khepera_noise_ros/memo.py',             'khepera_noise_ros/simconfig.py']
 
 
 def mypy(*args: str) -> subprocess.CompletedProcess:
