@@ -49,8 +49,8 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     ok = np.flatnonzero(pair & after & (np.r_[steps[1:], 0] % perturb_every != 0))
     xr = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
     dr = r[ok + 1] - r[ok]
-    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
-    dy = imbalance[ok + 1] - imbalance[ok]
+    front = imbalance(r)
+    dy = front[ok + 1] - front[ok]
     e = ep[ok]
     parts['xtx'] = _gram(e, xr, xr, m)
     parts['xty'] = sum_by(e, xr * dy[:, None], m)
@@ -93,6 +93,13 @@ def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
         pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
     out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
+
+
+def imbalance(r: Array) -> Array:
+    """The front readings' imbalance, left (sensors 0-2) less right (3-5): what a turn
+    answers."""
+    out: Array = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
+    return out
 
 
 def wrap(deg: Array) -> Array:

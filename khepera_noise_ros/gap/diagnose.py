@@ -154,7 +154,8 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if world is not None:         # the simulator identified: its world, then the effects
         result.world = world
         notes.append(f'the world identified: {", ".join(e.name for e in world.effects)} '
-                     f'remove {1 - world.after / world.before:.0%} of the held-out discrepancy')
+                     f'remove {reduction(world.before, world.after):.0%} of the held-out '
+                     'discrepancy')
         a, b = (t.with_config(t.config.with_effects(*world.effects)) for t in (a, b))
     c_a = a.compare()
     candidates = [fit_one(n, a, c_a) for n in o.effects if n not in WORLD_MODEL]
@@ -236,7 +237,7 @@ def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
         return None
     if log:
         log(f'world: {", ".join(e.name for e in fitted)} -> '
-            f'{1 - current.discrepancy / before.discrepancy:.2f}')
+            f'{reduction(before.discrepancy, current.discrepancy):.2f}')
     return World(fitted, before.discrepancy, current.discrepancy, p, notes)
 
 

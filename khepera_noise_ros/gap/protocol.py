@@ -140,5 +140,11 @@ def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
     episodes, ep = np.unique(rec.episode, return_inverse=True)
     order = np.lexsort((rec.step, ep))
     ep, steps = ep[order], rec.step[order]
-    pair = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
-    return episodes, ep, order, steps, pair
+    return episodes, ep, order, steps, consecutive(ep, steps)
+
+
+def consecutive(ep: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Per sample in episode and step order: it and the one before are consecutive steps
+    of one episode."""
+    out: np.ndarray = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
+    return out

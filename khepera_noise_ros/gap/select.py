@@ -176,7 +176,7 @@ class Selection:
             steps.append(entry(chosen[-1], step.cand.note, self.d_before, d_prev, d_last, step.p,
                                step.rule))
             if log:
-                log(f'compound: + {step.cand.name} -> {1 - d_prev / self.d_before:.2f}')
+                log(f'compound: + {step.cand.name} -> {reduction(self.d_before, d_prev):.2f}')
         for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
             s['parameters'], s['sensors'] = e.parameters(), list(e.sensors)
         return Compound(chosen, steps, self.d_before, current.discrepancy, current, current_reps,

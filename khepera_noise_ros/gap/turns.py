@@ -11,8 +11,8 @@ import numpy as np
 from ..effects.base import Array, Key
 from ..recording import Recording
 from . import bootstrap
-from .closedloop import Part, sum_by, wrap
-from .protocol import calibrating, condition_world, ordered, runs
+from .closedloop import Part, imbalance, sum_by, wrap
+from .protocol import calibrating, condition_world, consecutive, ordered, runs
 
 COMMANDS = tuple(range(-9, 0)) + tuple(range(1, 10))     # signed powers, + to the right
 MIN_TURNS = 4                    # rows a command's statistics need in the full data
@@ -42,18 +42,24 @@ def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episo
     steps = rec.step[order]
     u = np.nan_to_num(rec.direction[order] * rec.power[order])
     r = x[order][:, :8].astype(np.float64)
-    nxt = np.r_[(ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1), False]
     knock = knocks(rec, steps, every)
-    ok = np.flatnonzero(nxt & ~np.r_[knock[1:], False] & (u != 0))
+    ok = np.flatnonzero(_shown(consecutive(ep, steps), knock, u))
     onehot = (np.rint(u[ok])[:, None] == np.array(COMMANDS)[None, :]).astype(np.float64)
-    imbalance = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
-    change = imbalance[ok + 1] - imbalance[ok]
+    front = imbalance(r)
+    change = front[ok + 1] - front[ok]
     out = {'tc_imb': sum_by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
         dh = wrap(heading[ok + 1] - heading[ok])
         out['tc_turn'] = sum_by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
     return {**out, **_settling(r, u, ep, steps, knock, episodes)}
+
+
+def _shown(pair: np.ndarray, knock: np.ndarray, u: Array) -> np.ndarray:
+    """Rows whose command shows in the next: a turn commanded, the next row its episode's
+    next step and no knock there (``pair``: ``protocol.consecutive``)."""
+    out: np.ndarray = np.r_[pair[1:], False] & ~np.r_[knock[1:], False] & (u != 0)
+    return out
 
 
 def _moments(v: Array) -> Array:
@@ -158,8 +164,8 @@ def measured(loops: Sequence[Recording], sweeps: Sequence[Recording], config: An
         per = np.array([condition_world(rec, str(c), config.world).deg_per_power
                         for c in rec.condition[order]])
         knock = knocks(rec, steps, config.task.perturb_every)
-        nxt = np.r_[pair[1:], False] & ~np.r_[knock[1:], False]
-        t = np.flatnonzero(nxt & (u != 0) & np.isfinite(h) & np.isfinite(np.r_[h[1:], np.nan]))
+        t = np.flatnonzero(_shown(pair, knock, u) & np.isfinite(h)
+                           & np.isfinite(np.r_[h[1:], np.nan]))
         out.append(np.stack([u[t] * per[t], wrap(h[t + 1] - h[t])], axis=1))
         if calibrating(rec):
             out.append(_inferred(rec, sweeps, config, u * per, ep, steps, knock, h, order))
