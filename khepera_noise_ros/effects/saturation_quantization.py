@@ -58,12 +58,13 @@ class SaturationQuantization(
                     'dropout_value': max(set(values), key=values.count)}
         lattices = list(grid.values())
         step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
+        gridded = {s for s, lattice in grid.items() if _within(lattice, step, origin)}
         options = []
         # with dropouts, a grid is tried without its lattice too: only what is needed
         for lo, hi, use_grid in product([None, low] if low else [None],
                                         [None, high] if high else [None],
                                         [False, True] if grid and lost else [bool(grid)]):
-            sensors = (set(grid) if use_grid else set()) | set(lost) | \
+            sensors = (gridded if use_grid else set()) | set(lost) | \
                 set(lo['sensors'] if lo else ()) | set(hi['sensors'] if hi else ())
             low_value, high_value = lo['value'] if lo else 0.0, hi['value'] if hi else top
             if sensors and low_value < high_value:
@@ -87,3 +88,11 @@ def _strongest(found: list[dict[str, Any]], end: int) -> dict[str, Any] | None:
     """The limit at ``end`` (0 floor, 1 ceiling) holding the most readings."""
     mine = [f for f in found if f['end'] == end]
     return max(mine, key=lambda f: f['share'] * len(f['sensors'])) if mine else None
+
+
+def _within(lattice: tuple[float, float], step: float, origin: float) -> bool:
+    """Whether the points of ``lattice`` (step, origin) lie on (step, origin): one effect
+    rounds only the sensors whose lattice is the chosen one or a coarser part of it."""
+    points = np.array([lattice[1], lattice[1] + lattice[0]])
+    return bool(np.allclose(np.round((points - origin) / step) * step + origin, points,
+                            rtol=0.0, atol=1e-3))     # the 4 decimals a measured lattice has

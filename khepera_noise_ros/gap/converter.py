@@ -18,6 +18,7 @@ from .dropouts import dropouts, shares, share_keys
 PILE_ENDS = ('at the lowest reading', 'at the highest reading')
 MODULI = (2, 3, 4, 5, 8, 10)     # lattice steps the granularity statistics test
 TAIL, WIDTH = 0.02, 1.0          # where a pile is looked for, and how wide it is
+TOL = 0.1                        # a measured lattice's readings within a tenth of a step
 # a limit at v: the simulator puts EXPECTED readings beyond v, the real readings at v are
 # HELD of those the simulator puts at or beyond, exceed its count at v by MIN_SHARE of the
 # readings and Z Poisson sds, and exceed the next real value inward
@@ -278,11 +279,15 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
     return found
 
 
-def grid(x: Array) -> tuple[int, int]:
-    """(step, origin): the coarsest lattice (step 2..32) holding nearly all of ``x``."""
-    if x.size < 20 or not np.all(x == np.round(x)):
+def grid(x: Array) -> tuple[float, float]:
+    """(step, origin): the coarsest lattice holding nearly all of ``x``: for whole readings
+    a step of 2..32, exactly; for others (readings converted from another unit) the step
+    their distinct values keep, to ``TOL`` of a step, if it is coarser than 1."""
+    if x.size < 20:
         return 1, 0
     values, weight = np.unique(x, return_counts=True)
+    if not np.all(x == np.round(x)):
+        return _measured(values, weight)
     for q in range(32, 1, -1):
         hist = np.bincount(np.mod(values, q).astype(np.int64), weights=weight)
         if hist.max() >= 0.95 * x.size:
@@ -290,6 +295,32 @@ def grid(x: Array) -> tuple[int, int]:
     return 1, 0
 
 
-def on_grid(x: Array, step: int, origin: int) -> float:
-    """The share of readings ``x`` on the lattice origin + k * step."""
-    return float(np.mean(np.mod(x - origin, step) == 0)) if x.size else 0.0
+def _measured(values: Array, weight: np.ndarray) -> tuple[float, float]:
+    """``grid`` of readings that are not whole: the typical gap between distinct values,
+    averaged over the gaps it divides, and the origin the values sit around."""
+    gaps = np.diff(values)
+    if gaps.size < 2 or np.median(gaps) <= 1.0:
+        return 1, 0
+    step = float(gaps.sum() / np.round(gaps / np.median(gaps)).sum())
+    turn = np.exp(2j * np.pi * (values - values[0]) / step) @ weight
+    origin = values[0] + np.angle(turn) / (2 * np.pi) * step
+    step, origin = round(step, 4), round(float(origin - step * np.round(origin / step)), 4) + 0.0
+    if on_grid(values, step, origin, weight) < 0.95:
+        return 1, 0
+    return step, origin
+
+
+def tolerance(step: float, origin: float) -> float:
+    """How far from a lattice point, in steps, a reading on it may lie: none on a lattice of
+    whole numbers, ``TOL`` on one measured from readings converted from another unit."""
+    return 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
+
+
+def on_grid(x: Array, step: float, origin: float, weight: Any = None) -> float:
+    """The share of readings ``x`` (``weight``: each one's count) on the lattice
+    origin + k * step, to its ``tolerance``."""
+    if not x.size:
+        return 0.0
+    off = (x - origin) / step
+    return float(np.average(np.abs(off - np.round(off)) <= tolerance(step, origin),
+                            weights=weight))

@@ -180,6 +180,44 @@ def test_the_limit_detector_on_hand_made_readings():
     assert converter.limits(real, sim, range(4), (0.0, 525.0)) == []
 
 
+def test_a_lattice_of_readings_converted_from_another_unit_is_measured():
+    """Readings mapped from another unit are not whole: whole lux onto 0..525 lie on a
+    lattice of 525/280, 1/16 degree printed to 2 decimals on one of about 7.2 to a tenth
+    of a step; readings with no lattice, or one no coarser than 1, have none."""
+    rng = np.random.default_rng(5)
+    lux = np.round(np.clip(rng.normal(40, 30, 4000), 0, 280))
+    assert converter.grid(525 * (280 - lux) / 280) == (1.875, 0.0)
+    celsius = np.round(np.round(rng.normal(26, 0.8, 4000) * 16) / 16, 2)
+    step, origin = converter.grid(525 * (29 - celsius) / (29 - 24.44))
+    assert abs(step - 525 / 16 / 4.56) < 0.05 * step, step
+    assert converter.on_grid(525 * (29 - celsius) / (29 - 24.44), step, origin) > 0.95
+    shifted = np.round(rng.normal(300, 20, 4000) / 7.3) * 7.3 + 1.1
+    assert converter.grid(shifted) == (7.3, 1.1)
+    for plain in (rng.normal(300, 5, 4000), np.round(rng.normal(300, 5, 4000) * 2) / 2,
+                  rng.uniform(0, 525, 4000)):
+        assert converter.grid(plain) == (1, 0)
+    assert converter.grid(np.round(rng.normal(300, 30, 4000) / 16) * 16) == (16, 0)
+
+
+def test_the_fitter_rounds_converted_readings_onto_the_lattice_most_sensors_share():
+    """Four sensors on the lattice of whole lux, three on another: the effect takes the
+    first and only the sensors on it (one step rounds them all)."""
+    rec = recorded(stationary_protocol(samples=60), seed=21)
+    readings = rec.readings.copy()
+    readings[:, :4] = np.round(readings[:, :4] / 1.875) * 1.875
+    readings[:, 4:7] = np.round((readings[:, 4:7] - 1.1) / 7.3) * 7.3 + 1.1
+    rec = dropped(rec, [], 0.0, 0.0)
+    rec.readings[:] = readings
+    target = Target([rec], CONFIG, replicates=60)
+    c = target.compare()
+    found = target.evidence(c).converter()['lattices']
+    assert found == {**{s: (1.875, 0.0) for s in range(4)}, **{s: (7.3, 1.1) for s in (4, 5, 6)}}
+    cand = SaturationQuantization.fit(target.evidence(c))
+    assert cand.effect is not None and (cand.effect.step, cand.effect.origin) == (1.875, 0.0)
+    assert set(cand.effect.sensors) >= {0, 1, 2, 3}
+    assert not set(cand.effect.sensors) & {4, 5, 6}, cand
+
+
 # -- the value lattice in closed loop ---------------------------------------------------------
 
 def _shares(stats, q):
