@@ -17,6 +17,7 @@ from .dropouts import dropouts, shares, share_keys
 
 PILE_ENDS = ('at the lowest reading', 'at the highest reading')
 MODULI = (2, 3, 4, 5, 8, 10)     # lattice steps the granularity statistics test
+COARSEST = 32                    # the coarsest lattice step looked for
 TAIL, WIDTH = 0.02, 1.0          # where a pile is looked for, and how wide it is
 TOL = 0.1                        # a measured lattice's readings within a tenth of a step
 # a limit at v: the simulator puts EXPECTED readings beyond v, the real readings at v are
@@ -282,13 +283,13 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
 def grid(x: Array) -> tuple[float, float]:
     """(step, origin): the coarsest lattice holding nearly all of ``x``: for whole readings
     a step of 2..32, exactly; for others (readings converted from another unit) the step
-    their distinct values keep, to ``TOL`` of a step, if it is coarser than 1."""
+    their distinct values keep, to ``TOL`` of a step, if it lies above 1 and up to 32."""
     if x.size < 20:
         return 1, 0
     values, weight = np.unique(x, return_counts=True)
     if not np.all(x == np.round(x)):
         return _measured(values, weight)
-    for q in range(32, 1, -1):
+    for q in range(COARSEST, 1, -1):
         hist = np.bincount(np.mod(values, q).astype(np.int64), weights=weight)
         if hist.max() >= 0.95 * x.size:
             return q, int(hist.argmax())
@@ -299,9 +300,9 @@ def _measured(values: Array, weight: np.ndarray) -> tuple[float, float]:
     """``grid`` of readings that are not whole: the typical gap between distinct values,
     averaged over the gaps it divides, and the origin the values sit around."""
     gaps = np.diff(values)
-    if gaps.size < 2 or np.median(gaps) <= 1.0:
+    step = float(gaps.sum() / np.round(gaps / np.median(gaps)).sum()) if gaps.size > 1 else 0.0
+    if not 1.0 < step <= COARSEST:
         return 1, 0
-    step = float(gaps.sum() / np.round(gaps / np.median(gaps)).sum())
     turn = np.exp(2j * np.pi * (values - values[0]) / step) @ weight
     origin = values[0] + np.angle(turn) / (2 * np.pi) * step
     step, origin = round(step, 4), round(float(origin - step * np.round(origin / step)), 4) + 0.0

@@ -39,7 +39,7 @@ def part_sums(recs: Sequence[Recording], part: str,
                 d = np.diff(y, axis=0)
             else:
                 k = y.shape[0] // WINDOW
-                d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, -1).mean(axis=1)
+                d = (y[:k * WINDOW] - y.mean(axis=0)).reshape(k, WINDOW, y.shape[1]).mean(axis=1)
             if d.shape[0] < 2:
                 continue
             d = d - d.mean(axis=0) if part == 'fast' else d

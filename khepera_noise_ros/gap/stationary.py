@@ -17,6 +17,7 @@ LAGS = (1, 3)
 STEP_LAGS = 3
 SKIP = 3                  # first samples of a run left out of the own part
 MIN_OWN = 3               # channels the own part needs (the others' mean of two is one sensor)
+ROUNDING = 1e-10          # a spread below this share of the level: a constant sensor's rounding
 
 
 def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
@@ -228,6 +229,10 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
         dof = (n[:, m] - 1).sum(axis=1)
         cov = centred[:, m].sum(axis=1) / dof[:, None, None]
         var = np.diagonal(cov, axis1=-2, axis2=-1)
+        # a sensor that holds one value has no correlation, autocorrelation or kurtosis
+        # (readings not whole leave rounding, not noise, about a run's mean)
+        mean = b.part(s, 'sx')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None]
+        var = np.where(var > (ROUNDING * mean) ** 2, var, 0.0)
         sd = np.sqrt(var)
         cols.append((cov / (sd[:, :, None] * sd[:, None, :]))[:, pairs[0], pairs[1]])
         cols.append((b.part(s, 'lag_s')[:, m].sum(axis=1) / b.part(s, 'lag_n')[:, m].sum(

@@ -183,7 +183,8 @@ def test_the_limit_detector_on_hand_made_readings():
 def test_a_lattice_of_readings_converted_from_another_unit_is_measured():
     """Readings mapped from another unit are not whole: whole lux onto 0..525 lie on a
     lattice of 525/280, 1/16 degree printed to 2 decimals on one of about 7.2 to a tenth
-    of a step; readings with no lattice, or one no coarser than 1, have none."""
+    of a step; readings with no lattice, one no coarser than 1, or a few values far apart
+    (a step over 32) have none."""
     rng = np.random.default_rng(5)
     lux = np.round(np.clip(rng.normal(40, 30, 4000), 0, 280))
     assert converter.grid(525 * (280 - lux) / 280) == (1.875, 0.0)
@@ -194,7 +195,7 @@ def test_a_lattice_of_readings_converted_from_another_unit_is_measured():
     shifted = np.round(rng.normal(300, 20, 4000) / 7.3) * 7.3 + 1.1
     assert converter.grid(shifted) == (7.3, 1.1)
     for plain in (rng.normal(300, 5, 4000), np.round(rng.normal(300, 5, 4000) * 2) / 2,
-                  rng.uniform(0, 525, 4000)):
+                  rng.uniform(0, 525, 4000), np.repeat([100.3, 250.7, 400.1], 10)):
         assert converter.grid(plain) == (1, 0)
     assert converter.grid(np.round(rng.normal(300, 30, 4000) / 16) * 16) == (16, 0)
 

@@ -7,7 +7,7 @@ import pytest
 
 from khepera_noise_ros.effects import CorrelatedNoise, IntensityDependentNoise, TemporalDrift
 from khepera_noise_ros.effects.base import Key
-from khepera_noise_ros.gap import stationary
+from khepera_noise_ros.gap import evidence, stationary
 from khepera_noise_ros.gap.protocol import runs
 from khepera_noise_ros.gap.target import Target
 from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
@@ -139,3 +139,29 @@ def test_the_block_sums_give_the_pooled_within_run_statistics():
                 acf = np.concatenate(lagged[lag])[:, a].mean() / var[a]
                 assert got[Key('autocorrelation', (a,), condition, f'lag {lag}')] == \
                     pytest.approx(acf, rel=1e-4, abs=1e-5)
+
+
+def test_a_sensor_holding_one_value_has_no_correlation_statistics():
+    """Readings converted from another unit are not whole: a sensor that holds one such
+    value through each run leaves rounding about the run's mean, which is no noise to
+    correlate (it made an autocorrelation of 4.5)."""
+    rng = np.random.default_rng(1)
+    rec = recorded(stationary_protocol(), seed=4)
+    for r in runs(rec):                           # a temperature to 0.01 degree, mapped
+        rec.readings[r, 3] = 525 * (29 - np.round(rng.uniform(24.5, 28.9), 2)) / (29 - 24.44)
+    s = Target([rec], CONFIG, 0, replicates=0).real
+    held = {k.family: v for k, v in zip(s.keys, s.estimate)
+            if 3 in k.sensors and k.family in ('correlation', 'autocorrelation', 'kurtosis')}
+    assert set(held) == {'correlation', 'autocorrelation', 'kurtosis'}
+    assert not np.isfinite(list(held.values())).any(), held
+    others = [v for k, v in zip(s.keys, s.estimate)
+              if 3 not in k.sensors and k.family == 'autocorrelation']
+    assert np.isfinite(others).all() and np.all(np.abs(others) <= 1)
+
+
+def test_runs_shorter_than_the_slow_window_add_nothing_to_the_slow_part():
+    """Episodes of a few samples (a log that loses most readings) have no slow part."""
+    rec = recorded(stationary_protocol(), seed=4)
+    short = [np.arange(i, i + 3) for i in range(0, 30, 3)]
+    assert evidence.part_sums([rec], 'slow', [short]) == {}
+    assert evidence.part_sums([rec], 'fast', [short]) != {}
