@@ -236,7 +236,11 @@ def to_recording(table: Table, source_name: str, fmt: str, period_s: float,
     episode = episodes(table, period_s, episode_length, min_length)
     keep = episode >= 0
     if not keep.any():
-        raise ValueError(f'no run of {min_length} complete samples in {source_name}')
+        every = episodes(table, period_s, episode_length, 1)
+        longest = int(np.bincount(every[every >= 0]).max()) if (every >= 0).any() else 0
+        raise ValueError(f'no run of {min_length} complete samples in {source_name} (the '
+                         f'longest is {longest}: fewer channels or a lower --min-length '
+                         f'keep more)')
     readings = np.full((len(table.label), KHEPERA_CHANNELS), DARK)
     readings[:, :len(table.channels)] = to_readings(table, rng)
     readings = readings[keep]

@@ -156,3 +156,13 @@ def test_the_command_writes_a_readable_recording(tmp_path, capsys):
     rec = load(tmp_path / 'room')
     assert rec.manifest['converted_from']['channels']['s0']['high'] == 400.0
     assert len(rec) == 40 and rec.manifest['source'] == 'hardware'
+
+
+def test_too_few_complete_samples_say_how_many_there_are(tmp_path, capsys):
+    """Mote 3 misses epoch 2 and night begins at epoch 4: motes 1-3 all report in runs of
+    2, 1 and 2 epochs."""
+    assert cli.main(['convert', 'intel-lab', str(_intel_file(tmp_path)), str(tmp_path / 'x'),
+                     '--motes', '1', '2', '3', '--min-length', '3']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'no run of 3 complete samples' in err[0], err
+    assert 'the longest is 2' in err[0] and '--min-length' in err[0], err
