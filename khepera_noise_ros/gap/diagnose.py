@@ -10,7 +10,7 @@ import numpy as np
 
 from ..core.noise import ROUNDINGS
 from ..effects import DEFAULT, WORLD_MODEL, Effect, EmpiricalNoise
-from ..effects.base import Array, Candidate
+from ..effects.base import Array, Candidate, Key
 from ..effects.fitting import ALPHA
 from ..recording import Recording
 from . import allan, bootstrap, split
@@ -135,6 +135,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if not significant:
         notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
                      f'from the simulator at family-wise alpha {o.alpha} (Holm)')
+    notes += [n for n in [_noisier(c_full, o.alpha)] if n]
     if o.held_out:
         split.check_conditions(recordings, o.held_out)
     fit_part, test_part = split.split(list(recordings), o.held_out)
@@ -203,6 +204,28 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if significant and o.remainder:
         _remainder(result, a, b, d_before, o)
     return result
+
+
+def _noisier(c: Comparison, alpha: float) -> str:
+    """A note when most significant spread statistics are larger simulated than real, by
+    half or more at the median, per unit of the cell's level where it has one (the model's
+    noise grows with the reading; a cell at the brightest reading says nothing): every
+    effect adds variation, so none can close that part of the gap."""
+    where = {k: i for i, k in enumerate(c.keys)}
+    ratios = []
+    for i in np.flatnonzero(c.significant(alpha)):
+        k = c.keys[i]
+        j = where.get(Key('level', k.sensors, k.condition, k.part))
+        if k.family == 'spread' and (j is None or c.real[j] > 0 < c.sim[j]):
+            level = 1.0 if j is None else c.real[j] / c.sim[j]
+            ratios.append(c.sim[i] * level / max(c.real[i], 1e-9))
+    above = int(np.sum(np.array(ratios) > 1.0))
+    if len(ratios) < 3 or above < 0.75 * len(ratios) or np.median(ratios) < 1.5:
+        return ''
+    return (f'the simulator is noisier than the robot: its spread is larger in {above} of '
+            f'{len(ratios)} significant spread statistics (median {np.median(ratios):.1f} '
+            'times, per unit of level); the effects only add variation, so lower the noise '
+            'levels of --params and diagnose again')
 
 
 def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],

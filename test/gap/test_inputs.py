@@ -123,3 +123,16 @@ def test_groups_beyond_the_khepera_are_fitted_but_not_written_as_simulator_param
     assert any('not calibrated' in note for note in fitted.notes)
     with pytest.raises(ValueError, match='sensors are 0..7'):
         fitted.noise_model()
+
+
+def test_a_reference_noisier_than_the_robot_is_said_so():
+    """Every effect adds variation: against a reference noisier than the robot none can
+    help, and the notes say what to change; a robot noisier than the reference is not."""
+    quiet = recorded(stationary_protocol(), seed=3)                         # 2 % noise
+    noisy = simconfig.SimConfig(noise=NoiseModel.independent_only(0.06))
+    fast = dict(compound=False, remainder=False, rounding=False, replicates=30)
+    said = diagnose.diagnose([quiet], diagnose.Options(config=noisy, **fast)).notes
+    assert any(n.startswith('the simulator is noisier than the robot') for n in said), said
+    loud = recorded(stationary_protocol(), config=noisy, seed=3)
+    said = diagnose.diagnose([loud], diagnose.Options(config=CONFIG, **fast)).notes
+    assert not any('noisier' in n for n in said), said
