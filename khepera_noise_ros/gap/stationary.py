@@ -229,8 +229,9 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
         dof = (n[:, m] - 1).sum(axis=1)
         cov = centred[:, m].sum(axis=1) / dof[:, None, None]
         var = np.diagonal(cov, axis1=-2, axis2=-1)
-        # a sensor that holds one value has no correlation, autocorrelation or kurtosis
-        # (readings not whole leave rounding, not noise, about a run's mean)
+        # a sensor that holds one value has no correlation, autocorrelation or kurtosis:
+        # its sums leave rounding about the run's mean (readings not whole), or cancel a
+        # little below zero (a bootstrap draw of whole readings), not noise
         mean = b.part(s, 'sx')[:, m].sum(axis=1) / n[:, m].sum(axis=1)[:, None]
         var = np.where(var > (ROUNDING * mean) ** 2, var, 0.0)
         sd = np.sqrt(var)
