@@ -2,16 +2,17 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable, Sequence, TypeVar
+from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
-from .base import Effect, Evidence, Row
+from .base import Array, Effect, Evidence, Row
 
 Z_DETECT = 4.0          # a fingerprint statistic must lie this many standard errors out
 E = TypeVar('E', bound=Effect)
 ALPHA = 0.01            # family-wise level of the fitters' tests (Holm)
 STATIONARY, CLOSED_LOOP = 'stationary', 'closed_loop'
+TOL = 0.1               # a lattice measured in readings of another unit: a tenth of a step
 
 
 def present(evidence: Evidence, kinds: tuple[str, ...] | None) -> tuple[str, ...] | None:
@@ -86,3 +87,19 @@ def _rms(v: list[float]) -> float:
 
 def names(sensors: Sequence[int]) -> str:
     return ', '.join(f's{s}' for s in sensors)
+
+
+def tolerance(step: float, origin: float) -> float:
+    """How far from a lattice point, in steps, a reading on it may lie: none on a lattice of
+    whole numbers, ``TOL`` on one measured from readings converted from another unit."""
+    return 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
+
+
+def on_grid(x: Array, step: float, origin: float, weight: Any = None) -> float:
+    """The share of readings ``x`` (``weight``: each one's count) on the lattice
+    origin + k * step, to its ``tolerance``."""
+    if not x.size:
+        return 0.0
+    off = (x - origin) / step
+    return float(np.average(np.abs(off - np.round(off)) <= tolerance(step, origin),
+                            weights=weight))

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.khepera import DARK
 from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
-from .fitting import STATIONARY, names, present
+from .fitting import STATIONARY, names, on_grid, present
 
 
 @dataclass(frozen=True)
@@ -93,6 +93,4 @@ def _strongest(found: list[dict[str, Any]], end: int) -> dict[str, Any] | None:
 def _within(lattice: tuple[float, float], step: float, origin: float) -> bool:
     """Whether the points of ``lattice`` (step, origin) lie on (step, origin): one effect
     rounds only the sensors whose lattice is the chosen one or a coarser part of it."""
-    points = np.array([lattice[1], lattice[1] + lattice[0]])
-    return bool(np.allclose(np.round((points - origin) / step) * step + origin, points,
-                            rtol=0.0, atol=1e-3))     # the 4 decimals a measured lattice has
+    return on_grid(np.array([lattice[1], lattice[1] + lattice[0]]), step, origin) == 1.0

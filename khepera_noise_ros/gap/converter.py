@@ -10,7 +10,7 @@ import numpy as np
 
 from ..core.khepera import DARK
 from ..effects.base import Array, Key, Row
-from ..effects.fitting import Z_DETECT
+from ..effects.fitting import Z_DETECT, on_grid
 from ..recording import reading_range
 from . import bootstrap
 from .dropouts import dropouts, shares, share_keys
@@ -19,7 +19,6 @@ PILE_ENDS = ('at the lowest reading', 'at the highest reading')
 MODULI = (2, 3, 4, 5, 8, 10)     # lattice steps the granularity statistics test
 COARSEST = 32                    # the coarsest lattice step looked for
 TAIL, WIDTH = 0.02, 1.0          # where a pile is looked for, and how wide it is
-TOL = 0.1                        # a measured lattice's readings within a tenth of a step
 # a limit at v: the simulator puts EXPECTED readings beyond v, the real readings at v are
 # HELD of those the simulator puts at or beyond, exceed its count at v by MIN_SHARE of the
 # readings and Z Poisson sds, and exceed the next real value inward
@@ -283,7 +282,7 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
 def grid(x: Array) -> tuple[float, float]:
     """(step, origin): the coarsest lattice holding nearly all of ``x``: for whole readings
     a step of 2..32, exactly; for others (readings converted from another unit) the step
-    their distinct values keep, to ``TOL`` of a step, if it lies above 1 and up to 32."""
+    their distinct values keep, to a tenth of a step, if it lies above 1 and up to 32."""
     if x.size < 20:
         return 1, 0
     values, weight = np.unique(x, return_counts=True)
@@ -309,19 +308,3 @@ def _measured(values: Array, weight: np.ndarray) -> tuple[float, float]:
     if on_grid(values, step, origin, weight) < 0.95:
         return 1, 0
     return step, origin
-
-
-def tolerance(step: float, origin: float) -> float:
-    """How far from a lattice point, in steps, a reading on it may lie: none on a lattice of
-    whole numbers, ``TOL`` on one measured from readings converted from another unit."""
-    return 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
-
-
-def on_grid(x: Array, step: float, origin: float, weight: Any = None) -> float:
-    """The share of readings ``x`` (``weight``: each one's count) on the lattice
-    origin + k * step, to its ``tolerance``."""
-    if not x.size:
-        return 0.0
-    off = (x - origin) / step
-    return float(np.average(np.abs(off - np.round(off)) <= tolerance(step, origin),
-                            weights=weight))
