@@ -268,6 +268,14 @@ def columns(sensors: tuple[int, ...], channels: int) -> slice | list[int]:
     return slice(None) if located == list(range(channels)) else located
 
 
+def replaced(level: Array, cols: slice | list[int], values: Any) -> Array:
+    """A copy of ``level`` with ``values`` on the channels ``cols`` (the axis before the
+    robots': a sample's or a run's)."""
+    out: Array = level.copy()
+    out[..., cols, :] = values
+    return out
+
+
 def held(f: Callable[[Array], Array], x: Array) -> Array:
     """``f(x)`` of an elementwise ``f`` over (samples, ...), computed only where ``x``
     changes (a stationary light holds for a whole run): the same values."""

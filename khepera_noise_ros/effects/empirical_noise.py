@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import Array, Candidate, Effect, Evidence, Stage, Step, ar1, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, Step, ar1, param, replaced, rows
 
 KNOTS = 5
 WINDOW = 8        # samples averaged into one value of the slow part
@@ -70,10 +70,9 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
 
         def step(level: Array) -> Array:
             nonlocal state
-            out: Array = level.copy()
             fast = self._fast(level[located], rng.standard_normal((len(located), robots)),
                               spread, mix)
-            out[located] = level[located] * (1.0 + slow[:, None] * state) + fast
+            out = replaced(level, located, level[located] * (1.0 + slow[:, None] * state) + fast)
             state = a * state + math.sqrt(1 - a * a) * (smix @ rng.standard_normal(state.shape))
             return out
         return step
@@ -86,9 +85,8 @@ class EmpiricalNoise(Effect, name='empirical_noise', stage=Stage.LIGHT, free=99,
         z[1:] *= math.sqrt(1 - a * a)
         fast = self._fast(level[:, located].transpose(1, 0, 2), d[1::2].transpose(1, 0, 2),
                           spread, mix).transpose(1, 0, 2)
-        out: Array = level.copy()
-        out[:, located] = level[:, located] * (1.0 + slow[None, :, None] * ar1(z, a)) + fast
-        return out
+        return replaced(level, located,
+                        level[:, located] * (1.0 + slow[None, :, None] * ar1(z, a)) + fast)
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, columns, held, param
+from .base import Array, Candidate, Effect, Evidence, Stage, columns, held, param, replaced
 from .correlated_noise import groups_of
 from .fitting import Z_DETECT, names, refine
 
@@ -47,9 +47,7 @@ class IntensityDependentNoise(
         cols = columns(self.sensors, level.shape[1])
         width = 1 if self.shared else len(self.sensors)
         z = rng.standard_normal((level.shape[0], width, level.shape[2]))
-        out: Array = level.copy()
-        out[:, cols] += z * held(self.amplitude, level[:, cols])
-        return out
+        return replaced(level, cols, level[:, cols] + z * held(self.amplitude, level[:, cols]))
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..core.khepera import DARK
-from .base import Array, Candidate, Effect, Evidence, Stage, param, rows
+from .base import Array, Candidate, Effect, Evidence, Stage, param, replaced, rows
 from .fitting import STATIONARY, names, on_grid, present
 
 
@@ -39,9 +39,7 @@ class SaturationQuantization(
         read = np.clip(lattice, self.low, self.high)
         if self.dropout > 0:
             read = np.where(rng.random(read.shape) < self.dropout, self.dropout_value, read)
-        out: Array = level.copy()
-        out[:, located] = read
-        return out
+        return replaced(level, located, read)
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:

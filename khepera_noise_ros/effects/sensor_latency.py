@@ -23,22 +23,18 @@ class SensorLatency(Effect, name='sensor_latency', stage=Stage.READING, free=1,
     steps: int = param(1, 'samples each reading arrives late', low=0, high=1000)
 
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
-        located = rows(self.sensors, channels)
+        rows(self.sensors, channels)
         past: list[Array] = []
 
-        def step(level: Array) -> Array:
-            past.append(level[located].copy())
-            out: Array = level.copy()
-            out[located] = past[max(0, len(past) - 1 - self.steps)]
-            del past[:-self.steps - 1]
+        def step(level: Array) -> Array:      # the whole-run path over the last samples
+            past[:] = (past + [level.copy()])[-self.steps - 1:]
+            out: Array = self.over_time(np.stack(past), rng)[-1]
             return out
         return step
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
         out: Array = level.copy()
-        if self.steps <= 0:
-            return out
         # sample t reads sample max(t - steps, 0): slices, not a gather of every sample
         out[self.steps:, cols] = level[:max(level.shape[0] - self.steps, 0), cols]
         out[:self.steps, cols] = level[:1, cols]

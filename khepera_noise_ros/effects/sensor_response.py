@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, columns, param, rows
+from .base import (Array, Candidate, Effect, Evidence, Row, Stage, Step, columns, param, replaced,
+                   rows)
 from .fitting import Z_DETECT, names
 
 DELAYS = np.round(np.arange(0.0, 3.0001, 0.05), 2)
@@ -35,56 +36,43 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
     rate_dark: float = param(1.0, 'fraction of the way per sample towards dark',
                              above=0.0, high=1.0)
 
-    def _split(self) -> tuple[int, float]:
-        return int(math.floor(self.delay)), self.delay - int(math.floor(self.delay))
-
     def start(self, robots: int, channels: int, rng: np.random.Generator) -> Step:
         located = rows(self.sensors, channels)
-        n, f = self._split()
+        n, f = int(math.floor(self.delay)), self.delay % 1
         past: list[Array] = []
         state: list[Array] = []
 
         def step(level: Array) -> Array:
-            past.append(level[located].copy())
-            del past[:-n - 2]
-            a, b = past[max(0, len(past) - 1 - n)], past[max(0, len(past) - 2 - n)]
-            x = (1 - f) * a + f * b
-            if not state:
-                state.append(x)
-            else:
+            past[:] = (past + [level[located].copy()])[-n - 2:]
+            x = (1 - f) * past[max(0, len(past) - 1 - n)] + f * past[max(0, len(past) - 2 - n)]
+            if state:                               # else a settled start
                 y = state[0]
-                k = np.where(x < y, self.rate_bright, self.rate_dark)
-                state[0] = y + k * (x - y)
-            out: Array = level.copy()
-            out[located] = state[0]
-            return out
+                x = y + np.where(x < y, self.rate_bright, self.rate_dark) * (x - y)
+            state[:] = [x]
+            return replaced(level, located, x)
         return step
 
     def over_time(self, level: Array, rng: np.random.Generator) -> Array:
         cols = columns(self.sensors, level.shape[1])
-        n, f = self._split()
+        n, f = int(math.floor(self.delay)), self.delay % 1
         t = np.arange(level.shape[0])
         x = level[:, cols]
         x = (1 - f) * x[np.maximum(t - n, 0)] + f * x[np.maximum(t - n - 1, 0)]
-        out: Array = level.copy()
         if self.rate_bright == 1.0 and self.rate_dark == 1.0:
-            out[:, cols] = x
-            return out
+            return replaced(level, cols, x)
         y = np.empty_like(x)
         y[0] = x[0]
         change = np.r_[0, np.flatnonzero((x[1:] != x[:-1]).reshape(len(x) - 1, -1)
                                          .any(axis=1)) + 1, len(x)]
         # within a stretch of one light the lag closes a fixed share per sample
-        for t0, t1 in zip(change[:-1], change[1:]):
-            first = max(t0, 1)
-            if first >= t1:
+        for t0, t1 in zip(np.maximum(change[:-1], 1), change[1:]):
+            if t0 >= t1:
                 continue
-            prev, target = y[first - 1], x[first]
+            prev, target = y[t0 - 1], x[t0]
             k = np.where(target < prev, self.rate_bright, self.rate_dark)
-            m = np.arange(1, t1 - first + 1).reshape((-1,) + (1,) * (x.ndim - 1))
-            y[first:t1] = target + (prev - target) * (1 - k) ** m
-        out[:, cols] = y
-        return out
+            m = np.arange(1, t1 - t0 + 1).reshape((-1,) + (1,) * (x.ndim - 1))
+            y[t0:t1] = target + (prev - target) * (1 - k) ** m
+        return replaced(level, cols, y)
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:

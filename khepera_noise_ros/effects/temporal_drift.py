@@ -15,7 +15,8 @@ import numpy as np
 from scipy import stats as sps
 from scipy.optimize import minimize
 
-from .base import Array, Candidate, Effect, Evidence, Row, Stage, Step, ar1, columns, param, rows
+from .base import (Array, Candidate, Effect, Evidence, Row, Stage, Step, ar1, columns, param,
+                   replaced, rows)
 from .fitting import Z_DETECT, by_condition, by_sensor, names, significant
 
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
@@ -42,8 +43,7 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
 
         def step(level: Array) -> Array:
             nonlocal state
-            out: Array = level.copy()
-            out[located] *= 1.0 + state
+            out = replaced(level, located, level[located] * (1.0 + state))
             state = a * state + math.sqrt(1 - a * a) * self.sd * rng.standard_normal(state.shape)
             return out
         return step
@@ -55,9 +55,7 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
                                  level.shape[2]))
         z[0] *= self.sd
         z[1:] *= math.sqrt(1 - a * a) * self.sd
-        out: Array = level.copy()
-        out[:, cols] *= 1.0 + ar1(z, a)
-        return out
+        return replaced(level, cols, level[:, cols] * (1.0 + ar1(z, a)))
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
