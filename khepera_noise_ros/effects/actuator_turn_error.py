@@ -96,11 +96,8 @@ def _simplest(objective: Callable[..., float], scale: float, slip: float,
     objective stays within ``SAME`` of the fitted one."""
     best = objective(scale, slip, creep)
     out = [scale, slip, creep]
-    for i, plain in ((0, 1.0), (1, 0.0), (2, 0.0)):
-        if out[i] == plain:
-            continue
-        trial = list(out)
-        trial[i] = plain
-        if objective(*trial) <= best + SAME * abs(best):
+    for i, plain in enumerate((1.0, 0.0, 0.0)):
+        trial = out[:i] + [plain] + out[i + 1:]
+        if out[i] != plain and objective(*trial) <= best + SAME * abs(best):
             out = trial
     return out[0], out[1], out[2]

@@ -5,6 +5,7 @@ import math
 from typing import Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
+from scipy import stats as sps
 
 from .base import Array, Effect, Evidence, Row
 
@@ -83,6 +84,19 @@ def by_condition(rows: list[Row]) -> dict[str | None, dict[int, tuple[float, flo
 
 def _rms(v: list[float]) -> float:
     return float(np.sqrt(np.mean(np.square(v))))
+
+
+def line_p(real: Array, sim: Array, se: Array) -> tuple[Array, float]:
+    """The best line through the model's levels ``sim`` to the ``real`` ones (an offset
+    alone where ``sim`` hardly varies), weighted by ``se``, and the chi-square p-value of
+    its residuals."""
+    if np.ptp(sim) < 1:
+        line: Array = sim + float(np.average(real - sim, weights=se ** -2))
+        dof = real.size - 1
+    else:
+        line = np.asarray(np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim), np.float64)
+        dof = real.size - 2
+    return line, float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof))
 
 
 def names(sensors: Sequence[int]) -> str:

@@ -97,8 +97,8 @@ def laws(cells: Sequence[tuple[float, float]]) -> list[tuple[str, float, float, 
     cells [(level, excess variance)] best."""
     if not cells:
         return []
-    level = np.array([c[0] for c in cells], np.float64)
-    sd = np.sqrt(np.clip(np.array([c[1] for c in cells], np.float64), 0.0, None))
+    level, variance = np.array(cells, np.float64).T
+    sd = np.sqrt(np.clip(variance, 0.0, None))
     out = []
     for direction in DIRECTIONS:
         for exponent in EXPONENTS:
@@ -109,5 +109,4 @@ def laws(cells: Sequence[tuple[float, float]]) -> list[tuple[str, float, float, 
             coef, residual = nnls(x / norm, sd)
             coef = coef / norm
             out.append((direction, exponent, float(coef[0]), float(coef[1]), float(residual)))
-    out.sort(key=lambda t: t[4])
-    return out[:3]
+    return sorted(out, key=lambda t: t[4])[:3]

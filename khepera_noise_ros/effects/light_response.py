@@ -13,12 +13,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats as sps
 from scipy.interpolate import Akima1DInterpolator
 
 from ..core.khepera import DARK, TENTHS
 from .base import Array, Candidate, Effect, Evidence, Row, Stage, param, rows
-from .fitting import by_sensor, names, significant
+from .fitting import by_sensor, line_p, names, significant
 
 SPARSE = 12           # fewer bearings than this round the circle leave the shape a guess
 
@@ -109,8 +108,7 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
                 mine = sorted((h, float(stock[cond][s, int(round(h * 10)) % TENTHS]) +
                                r.real - r.sim) for (c, h, k), r in cells.items()
                               if c == cond and k == s)
-                knots = np.array([h for h, _ in mine])
-                v = np.array([x for _, x in mine])
+                knots, v = np.array(mine).T
                 values += [round(float(x), 2) for x in around(bearings, knots, v)]
         effect = cls(tuple(located), tuple(float(b) for b in bearings),
                      tuple(float(worlds[c].lamp_distance_mm) for c in conditions),
@@ -157,13 +155,8 @@ def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
         if real.size < 3:
             p.append(1.0)
             continue
-        if np.ptp(sim) < 1:
-            line: Array = sim + float(np.average(real - sim, weights=se ** -2))
-            dof = real.size - 1
-        else:
-            line = np.asarray(np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim), np.float64)
-            dof = real.size - 2
-        p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), dof)))
+        line, chance = line_p(real, sim, se)
+        p.append(chance)
         if float(np.sqrt(np.mean((real - line) ** 2))) < noise:
             small.add(s)
     return [s for s in significant(cells, p) if s not in small]

@@ -101,14 +101,15 @@ class EffectEpisodes(Episodes):
     def reset(self, seed: Any, robots: int | None = None, bearing_deg: Any = None) -> Array:
         """Start episodes; the effects (``self.effects`` now) start afresh too."""
         n = robots if robots is not None else int(np.size(seed))
-        # no effects: no generator to build, exactly the core's episodes
-        rng = np.random.default_rng(entropy(seed)) if self.effects else None
+        rng = np.random.default_rng(entropy(seed))     # its own: the core's streams untouched
         starts = {stage: [e.start(n, SENSORS, rng) for e in staged(self.effects, stage)]
-                  for stage in Stage} if rng is not None else {stage: [] for stage in Stage}
+                  for stage in Stage}
         self._light, self._reading = starts[Stage.LIGHT], starts[Stage.READING]
         self._turning = starts[Stage.ACTUATOR]
+        # the wheels of a turn effect that has them make the task's knocks as turns
         self._knocking = [step for e, step in zip(staged(self.effects, Stage.ACTUATOR),
-                                                  self._turning) if wheels_knocks(e)]
+                                                  self._turning)
+                          if getattr(e, 'wheel_knocks', False) and getattr(e, 'knocks', False)]
         self.noise = self._noise
         out: Array = super().reset(seed, robots, bearing_deg)
         return out
@@ -133,11 +134,6 @@ class EffectEpisodes(Episodes):
             deg = turn(deg)
         out: np.ndarray = to_tenths(deg)
         return out
-
-
-def wheels_knocks(effect: Effect) -> bool:
-    """Does ``effect`` make the task's knocks as turns (not by scaling the task)?"""
-    return bool(getattr(type(effect), 'wheel_knocks', False) and getattr(effect, 'knocks', False))
 
 
 def light_table(world: World, effects: Sequence[Effect] = (), rounded: bool = False) -> Array:

@@ -17,7 +17,7 @@ from scipy.optimize import minimize
 
 from .base import (Array, Candidate, Effect, Evidence, Row, Stage, Step, ar1, columns, param,
                    replaced, rows)
-from .fitting import Z_DETECT, by_condition, by_sensor, names, significant
+from .fitting import Z_DETECT, by_condition, by_sensor, line_p, names, significant
 
 MIN_TIME_CONSTANT = 0.5  # samples; below this a drift is white noise, not a drift
 # Nelder-Mead objectives: 16, or 10 inside the box the own wanders bound (there the later
@@ -140,11 +140,7 @@ def _unexplained_levels(levels: list[Row]) -> list[int]:
     cells, p = by_sensor(levels), []
     for mine in cells.values():
         real, sim, se = (np.array(v) for v in zip(*[(r.real, r.sim, r.se) for r in mine]))
-        if real.size < 4 or np.ptp(sim) < 1:
-            p.append(1.0)
-        else:
-            line = np.polyval(np.polyfit(sim, real, 1, w=1 / se), sim)
-            p.append(float(sps.chi2.sf((((real - line) / se) ** 2).sum(), real.size - 2)))
+        p.append(1.0 if real.size < 4 or np.ptp(sim) < 1 else line_p(real, sim, se)[1])
     return significant(cells, p)
 
 
