@@ -114,14 +114,12 @@ def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
     rss0 = _gain(c, e, w)[1]
     made = effect.mean(c)
     sizes = np.unique(np.abs(c))
-    ratio, p_size = [], 1.0
+    ratio: list[float] = []
+    p_size = 1.0
     if sizes.size >= 3:           # a scale per commanded size where it fits better
-        rss_table = 0.0
-        for size in sizes:
-            g = np.abs(c) == size
-            r, rss_size = _gain(made[g], e[g], w[g])
-            ratio.append(round(float(np.clip(r, 0.0, 5.0)), 4))
-            rss_table += rss_size
+        fits = [_gain(made[g], e[g], w[g]) for g in (np.abs(c) == size for size in sizes)]
+        ratio = [round(float(np.clip(r, 0.0, 5.0)), 4) for r, _ in fits]
+        rss_table = sum(rss_size for _, rss_size in fits)
         dof = n - 3 - sizes.size
         if dof > 0 and rss - rss_table > TINY * n:
             f = ((rss - rss_table) / sizes.size) / max(rss_table / dof, TINY)

@@ -56,7 +56,9 @@ class SaturationQuantization(
                     'dropout_value': max(set(values), key=values.count)}
         lattices = list(grid.values())
         step, origin = max(set(lattices), key=lattices.count) if lattices else (1, 0)
-        gridded = {s for s, lattice in grid.items() if _within(lattice, step, origin)}
+        # one effect rounds only the sensors whose lattice is the chosen one or a coarser part
+        gridded = {s for s, (k, o) in grid.items()
+                   if on_grid(np.array([o, o + k]), step, origin) == 1.0}
         options = []
         # with dropouts, a grid is tried without its lattice too: only what is needed
         for lo, hi, use_grid in product([None, low] if low else [None],
@@ -86,9 +88,3 @@ def _strongest(found: list[dict[str, Any]], end: int) -> dict[str, Any] | None:
     """The limit at ``end`` (0 floor, 1 ceiling) holding the most readings."""
     mine = [f for f in found if f['end'] == end]
     return max(mine, key=lambda f: f['share'] * len(f['sensors'])) if mine else None
-
-
-def _within(lattice: tuple[float, float], step: float, origin: float) -> bool:
-    """Whether the points of ``lattice`` (step, origin) lie on (step, origin): one effect
-    rounds only the sensors whose lattice is the chosen one or a coarser part of it."""
-    return on_grid(np.array([lattice[1], lattice[1] + lattice[0]]), step, origin) == 1.0

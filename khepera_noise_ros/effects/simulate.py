@@ -42,9 +42,7 @@ class EffectEpisodes(Episodes):
     def __init__(self, world: World = World(), noise: NoiseModel = NoiseModel(),
                  task: Task = Task(), effects: Sequence[Effect] = ()):
         self.effects = tuple(effects)
-        self._light: list[Step] = []
-        self._reading: list[Step] = []
-        self._turning: list[Step] = []
+        self._steps: dict[Stage, list[Step]] = {stage: [] for stage in Stage}
         self._knocking: list[Step] = []
         super().__init__(world, noise, task)
 
@@ -68,10 +66,9 @@ class EffectEpisodes(Episodes):
         """The world with its table as the world-stage effects make it."""
         Episodes.world.fset(self, world)  # type: ignore[attr-defined]
         if staged(self.effects, Stage.WORLD):
-            self._table = np.ascontiguousarray(
-                light_table(world, self.effects, True).astype(np.float32).T)
-            self._levels = np.ascontiguousarray(
-                light_table(world, self.effects).astype(np.float32).T)
+            self._table, self._levels = (np.ascontiguousarray(
+                light_table(world, self.effects, rounded).astype(np.float32).T)
+                for rounded in (True, False))
 
     @property
     def task(self) -> Task:
@@ -96,30 +93,28 @@ class EffectEpisodes(Episodes):
     def noise(self, model: Any) -> None:
         """A new noise model keeps the effects (and their state) of the running episodes."""
         model = getattr(model, 'model_noise', model)
-        self._noise = EffectNoise(model, self._light, self._reading)
+        self._noise = EffectNoise(model, self._steps[Stage.LIGHT], self._steps[Stage.READING])
 
     def reset(self, seed: Any, robots: int | None = None, bearing_deg: Any = None) -> Array:
         """Start episodes; the effects (``self.effects`` now) start afresh too."""
         n = robots if robots is not None else int(np.size(seed))
         rng = np.random.default_rng(entropy(seed))     # its own: the core's streams untouched
-        starts = {stage: [e.start(n, SENSORS, rng) for e in staged(self.effects, stage)]
-                  for stage in Stage}
-        self._light, self._reading = starts[Stage.LIGHT], starts[Stage.READING]
-        self._turning = starts[Stage.ACTUATOR]
+        self._steps = {stage: [e.start(n, SENSORS, rng) for e in staged(self.effects, stage)]
+                       for stage in Stage}
         # the wheels of a turn effect that has them make the task's knocks as turns
         self._knocking = [step for e, step in zip(staged(self.effects, Stage.ACTUATOR),
-                                                  self._turning)
+                                                  self._steps[Stage.ACTUATOR])
                           if getattr(e, 'wheel_knocks', False) and getattr(e, 'knocks', False)]
         self.noise = self._noise
         out: Array = super().reset(seed, robots, bearing_deg)
         return out
 
     def step(self, direction: Any, power: Any) -> Array | None:
-        if self._turning and not self.done:
+        if self._steps[Stage.ACTUATOR] and not self.done:
             commanded = np.asarray(direction, np.float64) * np.asarray(power) \
                 * self.world.deg_per_power
             actual = commanded
-            for turn in self._turning:
+            for turn in self._steps[Stage.ACTUATOR]:
                 actual = turn(actual)
             self._bearing = (self._bearing + to_tenths(actual - commanded)) % TENTHS
         out: Array | None = super().step(direction, power)
