@@ -56,11 +56,9 @@ class ActuatorTurnError(Effect, name='actuator_turn_error', stage=Stage.ACTUATOR
             return cls.nothing('the readings respond to turns as simulated')
         # recorded headings measure the turn itself; else the readings' response to it, at
         # both lags (least squares): with a latency given, the lag-0 response is noise alone
-        size = [(r.real, r.sim) for r in evidence.rows('turn_size')]
-        pairs = np.array(size or [(r.real, r.sim) for r in evidence.rows('turn_response')],
-                         np.float64)
-        pairs = pairs[np.isfinite(pairs).all(axis=1)]
-        real, sim = pairs.T if pairs.size else (np.zeros(1), np.zeros(1))
+        measured = evidence.rows('turn_size') or evidence.rows('turn_response')
+        pairs = np.array([(r.real, r.sim) for r in measured], np.float64)
+        real, sim = pairs[np.isfinite(pairs).all(axis=1)].T
         ratio = float(real @ sim / (sim @ sim)) if sim @ sim > 1e-18 else 1.0
         scale0 = float(np.clip(ratio, 0.2, 2.0))
         creeps = any(k.part == STILL for f in SCATTER for k in flagged[f])
