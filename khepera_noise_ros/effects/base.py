@@ -269,8 +269,7 @@ def columns(sensors: tuple[int, ...], channels: int) -> slice | list[int]:
 
 
 def replaced(level: Array, cols: slice | list[int], values: Any) -> Array:
-    """A copy of ``level`` with ``values`` on the channels ``cols`` (the axis before the
-    robots': a sample's or a run's)."""
+    """A copy of ``level`` (a sample's or a run's) with ``values`` on the channels ``cols``."""
     out: Array = level.copy()
     out[..., cols, :] = values
     return out

@@ -179,13 +179,10 @@ def sense(base: Array, noise: NoiseModel, sensor_draws: AnyArray, group_draws: A
     level = base
     for apply in light:
         level = apply(level)
-    if rounds_level(noise):
-        # rounded, not clipped: the converter saturates the noisy reading
-        level = np.rint(level).astype(np.float32)
-        out = noise.apply(level, sensor_draws, group_draws).astype(np.float64)
-    else:
-        out = noise.added(np.asarray(level, np.float32), sensor_draws,
-                          group_draws).astype(np.float64)
+    rounded = rounds_level(noise)
+    kernel = noise.apply if rounded else noise.added
+    level = np.rint(level) if rounded else level    # not clipped: the converter saturates
+    out = kernel(np.asarray(level, np.float32), sensor_draws, group_draws).astype(np.float64)
     for apply in reading:
         out = apply(out)
     result: Array = np.clip(np.rint(out), 0.0, DARK)
