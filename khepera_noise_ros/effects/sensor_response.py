@@ -44,7 +44,8 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
 
         def step(level: Array) -> Array:
             past[:] = (past + [level[located].copy()])[-n - 2:]
-            x = (1 - f) * past[max(0, len(past) - 1 - n)] + f * past[max(0, len(past) - 2 - n)]
+            a, b = past[max(0, len(past) - 1 - n)], past[max(0, len(past) - 2 - n)]
+            x = (1 - f) * a + f * b
             if state:                               # else a settled start
                 y = state[0]
                 x = y + np.where(x < y, self.rate_bright, self.rate_dark) * (x - y)
