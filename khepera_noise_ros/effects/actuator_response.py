@@ -9,7 +9,7 @@ fits as well.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -108,33 +108,33 @@ def _direct(turns: Array) -> tuple[ActuatorResponse, bool]:
     c, e = turns[:, 0], turns[:, 1]
     n = len(c)
     effect, _ = _form(c, e, np.ones(n))
-    scatter, jitter = _scatter(effect.mean(c), e - effect.mean(c))
+    scatter, jitter = _scatter(effect, c, e)
     w = 1.0 / (scatter ** 2 * effect.mean(c) ** 2 + jitter ** 2 + 0.01)
     effect, rss = _form(c, e, w)
     rss0 = _gain(c, e, w)[1]
     made = effect.mean(c)
     sizes = np.unique(np.abs(c))
-    ratio: list[float] = []
     p_size = 1.0
     if sizes.size >= 3:           # a scale per commanded size where it fits better
         fits = [_gain(made[g], e[g], w[g]) for g in (np.abs(c) == size for size in sizes)]
-        ratio = [round(float(np.clip(r, 0.0, 5.0)), 4) for r, _ in fits]
         rss_table = sum(rss_size for _, rss_size in fits)
         dof = n - 3 - sizes.size
         if dof > 0 and rss - rss_table > TINY * n:
             f = ((rss - rss_table) / sizes.size) / max(rss_table / dof, TINY)
             p_size = float(sps.f.sf(f, sizes.size, dof))
+        if p_size < ALPHA:
+            effect = replace(effect, sizes=tuple(float(x) for x in sizes),
+                             scales=tuple(round(float(np.clip(r, 0.0, 5.0)), 4) for r, _ in fits))
     dof = max(n - 3, 1)
     p_form = float(sps.f.sf(((rss0 - rss) / 2) / max(rss / dof, TINY), 2, dof)) \
         if rss0 - rss > TINY * n else 1.0
-    table = (tuple(float(x) for x in sizes), tuple(ratio)) if p_size < ALPHA else ((), ())
-    made = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table).mean(c)
-    effect = ActuatorResponse(effect.dead_band, effect.gain, effect.asymmetry, *table,
-                              *_scatter(made, e - made))
-    return effect, p_form >= ALPHA and p_size >= ALPHA
+    scatter, jitter = _scatter(effect, c, e)
+    return replace(effect, scatter=scatter, jitter=jitter), p_form >= ALPHA and p_size >= ALPHA
 
 
-def _scatter(made: Array, residual: Array) -> tuple[float, float]:
-    """(share, degrees): residual variance = share^2 made^2 + degrees^2, non-negative."""
-    coef, _ = nnls(np.stack([made ** 2, np.ones_like(made)], axis=1), residual ** 2)
+def _scatter(effect: ActuatorResponse, c: Array, e: Array) -> tuple[float, float]:
+    """(share, degrees) of the turns ``e`` made about the effect's of commands ``c``: residual
+    variance = share^2 made^2 + degrees^2, non-negative."""
+    made = effect.mean(c)
+    coef, _ = nnls(np.stack([made ** 2, np.ones_like(made)], axis=1), (e - made) ** 2)
     return round(float(np.sqrt(coef[0])), 4), round(float(np.sqrt(coef[1])), 3)
