@@ -87,9 +87,8 @@ def _rms(v: list[float]) -> float:
 
 
 def line_p(real: Array, sim: Array, se: Array) -> tuple[Array, float]:
-    """The best line through the model's levels ``sim`` to the ``real`` ones (an offset
-    alone where ``sim`` hardly varies), weighted by ``se``, and the chi-square p-value of
-    its residuals."""
+    """The weighted line from the model's levels ``sim`` to the ``real`` ones (an offset alone
+    where ``sim`` hardly varies) and the chi-square p-value of its residuals."""
     if np.ptp(sim) < 1:
         line: Array = sim + float(np.average(real - sim, weights=se ** -2))
         dof = real.size - 1
