@@ -61,12 +61,8 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
     """Sums by ``total``'s groups (of the samples ``order`` keeps) of the statistics."""
     o, c = order, x.shape[1]
     low, high = (x.min(), x.max()) if x.size else (np.nan, np.nan)
-    if np.isfinite(low) and np.isfinite(high):
-        whole = np.all(x == np.round(x)) and high - low < 1e5
-    else:                                   # NaN or infinite readings
-        low = np.nanmin(x) if np.isfinite(x).any() else 0.0
-        whole = np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5
-    if not whole:
+    # whole readings over a span a histogram holds (NaN and infinities are not)
+    if not (np.isfinite(low) and high - low < 1e5 and np.all(x == np.round(x))):
         return {'edge': total(edge_hits(x)[o]), 'dropped': _dropped(marks, order, total)}
     # whole readings: everything from histograms of values (cell by channel)
     xi = (x - low).astype(np.int64)
