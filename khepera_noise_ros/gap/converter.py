@@ -250,10 +250,10 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
         values, count = np.unique(x, return_counts=True)
         if values.size == 0 or y.size == 0:
             continue
-        ends: list[tuple[Any, ...] | None] = \
-            [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])] \
-            if values.size > 1 else [(values[0], count[0], 0)] * 2
-        if values.size == 1:      # held at one value: the limit on the side the simulator passes
+        ends: list[tuple[Any, ...] | None] = [(values[0], count[0], 0)] * 2
+        if values.size > 1:
+            ends = [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])]
+        else:       # held at one value: the limit on the side the simulator passes
             ends[int(np.mean(y > values[0]) < np.mean(y < values[0]))] = None
         for end, found_ in enumerate(ends):
             if found_ is None or found_[0] == reading_range[end]:

@@ -323,10 +323,9 @@ def seen_share(repaired: Sequence[Any], sensors: Sequence[int]) -> float:
     """The share of dropouts marked among the ``sensors``' readings."""
     hits = total = 0.0
     for r in repaired:
-        h, n, _ = _marked(r, list(r.recording.channels_used))
-        used = [list(r.recording.channels_used).index(s) for s in sensors]
-        hits += h[used].sum()
-        total += n[used].sum()
+        h, n, _ = _marked(r, list(sensors))
+        hits += h.sum()
+        total += n.sum()
     return hits / max(total, 1.0)
 
 

@@ -307,8 +307,7 @@ def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tu
 
 def blocks(rec: Recording, x: Array, lay: Layout, total: Grouping,
            more: dict[str, Array]) -> bootstrap.Blocks:
-    """The ``Blocks`` of a stationary recording grouped by ``total``: these sums and
-    ``more`` (the converter's)."""
+    """The ``Blocks`` of a stationary recording: its sums by ``total`` and ``more``."""
     table, layout = bootstrap.pack({**sums(lay, x, total), **more})
     return bootstrap.Blocks('stationary', tuple(rec.channels_used), lay.labels, total.strata,
                             table, layout)
