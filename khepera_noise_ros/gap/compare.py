@@ -141,12 +141,11 @@ def compare(real: Stats, sim: Stats, inflation: Array | None = None) -> Comparis
     """The statistics both share, their differences standardised; ``inflation`` (aligned
     with ``sim.keys``) scales both variances where the bootstrap understates them."""
     where = sim.index
-    pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where]
-    ri = np.array([p[0] for p in pairs], np.int64)
-    si = np.array([p[1] for p in pairs], np.int64)
+    ri = np.array([i for i, k in enumerate(real.keys) if k in where], np.int64)
+    keys = [real.keys[i] for i in ri]
+    si = np.array([where[k] for k in keys], np.int64)
     r, s = real.estimate[ri], sim.estimate[si]
     scale = 1.0 if inflation is None else inflation[si]
-    keys = [real.keys[i] for i in ri]
     se = np.sqrt((real.variance[ri] + sim.variance[si]) * scale + floors(keys))
     ok = np.flatnonzero(np.isfinite(r) & np.isfinite(s) & np.isfinite(se))
     z = np.clip((r[ok] - s[ok]) / se[ok], -Z_CAP, Z_CAP)

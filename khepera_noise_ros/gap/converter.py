@@ -61,7 +61,6 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
     """Sums by ``total``'s groups (of the samples ``order`` keeps) of the statistics."""
     o, c = order, x.shape[1]
     low, high = (x.min(), x.max()) if x.size else (np.nan, np.nan)
-    # whole readings over a span a histogram holds (NaN and infinities are not)
     if not (np.isfinite(low) and high - low < 1e5 and np.all(x == np.round(x))):
         return {'edge': total(edge_hits(x)[o]), 'dropped': _dropped(marks, order, total)}
     # whole readings: everything from histograms of values (cell by channel)
