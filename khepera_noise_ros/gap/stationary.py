@@ -27,8 +27,7 @@ def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
     pairs = np.stack([cond, np.where(np.isfinite(heading), heading, np.inf)], axis=1)
     unique, first, index = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
+    rank = np.argsort(order)                    # each cell's place in order of appearance
     labels = [(str(conditions[int(unique[i, 0])]),
                float(unique[i, 1]) if np.isfinite(unique[i, 1]) else None) for i in order]
     return labels, rank[index.ravel()]
@@ -126,8 +125,7 @@ class Layout:
         kept, chunk = run_order[keep], np.unique(chunk[keep], return_inverse=True)[1]
         stratum_of_chunk = np.zeros(int(chunk.max()) + 1 if chunk.size else 0, np.int64)
         stratum_of_chunk[chunk] = self.cell[kept]
-        rank = np.empty_like(stratum_of_chunk)           # blocks in stratum order
-        rank[np.argsort(stratum_of_chunk, kind='stable')] = np.arange(rank.size)
+        rank = np.argsort(np.argsort(stratum_of_chunk, kind='stable'))   # blocks by stratum
         block = rank[chunk]
         by = np.argsort(block, kind='stable')
         self.order, block = kept[by], block[by]          # kept samples, block by block
