@@ -45,8 +45,8 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
              'right': by((rec.direction[order] > 0)[:, None] * 1.0)}
     # the turn regression: rows j with j - 1, j, j + 1 consecutive and j + 1 no knock (the
     # knock, not the command, moves the heading there)
-    after = np.r_[pair[1:], False]
-    ok = np.flatnonzero(pair & after & (np.r_[steps[1:], 0] % perturb_every != 0))
+    after = np.r_[pair[1:], False] & (np.r_[steps[1:], 0] % perturb_every != 0)
+    ok = np.flatnonzero(pair & after)
     xr = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
     dr = r[ok + 1] - r[ok]
     front = imbalance(r)
@@ -60,15 +60,13 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     w = _bands(u[ok])
     parts['scatter_n'] = sum_by(e, w, m)
     inside = w.any(axis=1)             # each row in its band's group only
-    band = e[inside] * w.shape[1] + w[inside].argmax(axis=1)
-    shape = (m, w.shape[1], design.shape[1])
-    parts['scatter_xx'] = _gram(band, design[inside], design[inside], m * w.shape[1]) \
-        .reshape(shape + design.shape[1:])
-    parts['scatter_xy'] = _gram(band, design[inside], dr[inside], m * w.shape[1]) \
-        .reshape(shape + dr.shape[1:])
+    band, bands = e[inside] * w.shape[1] + w[inside].argmax(axis=1), m * w.shape[1]
+    for name, y in (('xx', design), ('xy', dr)):
+        parts[f'scatter_{name}'] = _gram(band, design[inside], y[inside], bands) \
+            .reshape(m, w.shape[1], design.shape[1], -1)
     parts['scatter_yy'] = sum_by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
-        t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
+        t = np.flatnonzero(after)
         dh = wrap(heading[t + 1] - heading[t])
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
         parts['heading_band'] = sum_by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
@@ -84,13 +82,11 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
 
 
 def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep``, in one sparse product."""
+    """(episodes, ...) sums of the (N, ...) ``values`` by the sorted ``ep``, in one sparse
+    product."""
     n = ep.size
-    if n and np.all(ep[1:] >= ep[:-1]):
-        indptr = np.searchsorted(ep, np.arange(episodes + 1))
-        pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
-    else:
-        pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
+    indptr = np.searchsorted(ep, np.arange(episodes + 1))
+    pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
     out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
 
@@ -266,10 +262,7 @@ def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
 
 
 def _shift(h: Array, lag: int) -> Array:
-    if lag == 0:
-        return h
-    out = np.zeros_like(h)
-    out[lag:] = h[:-lag]
+    out: Array = np.r_[np.zeros(lag), h[:h.size - lag]]
     return out
 
 

@@ -29,9 +29,7 @@ MARGIN = 10.0              # degrees searched beyond twice the commanded turn
 def knocks(rec: Recording, steps: np.ndarray, every: int) -> np.ndarray:
     """The rows a knock moves: none when the recording's task has no knock."""
     task = rec.manifest.get('task') or {}
-    if float(task.get('perturbation_deg', 1.0)) == 0.0:
-        return np.zeros(len(steps), bool)
-    out: np.ndarray = steps % int(every) == 0
+    out: np.ndarray = (steps % int(every) == 0) & (float(task.get('perturbation_deg', 1.0)) != 0)
     return out
 
 
@@ -73,17 +71,16 @@ def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.n
     dd = np.zeros((episodes, 2, SAMPLES, r.shape[1]))
     d2, n = np.zeros((episodes, 2, r.shape[1])), np.zeros((episodes, 2, r.shape[1]))
     t = lone(u, ep, steps, knock)
-    if t.size:
-        old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
-        new = r[t[:, None] + np.arange(AFTER - SETTLED + 1, AFTER + 1)[None, :]].mean(axis=1)
-        change = old - new
-        side = (change < 0).astype(np.int64)             # 0: towards bright, 1: dark
-        sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
-        e = np.broadcast_to(ep[t][:, None], change.shape)
-        np.add.at(d2, (e, side, sensor), change ** 2)
-        np.add.at(n, (e, side, sensor), 1.0)
-        for j in range(SAMPLES):
-            np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
+    old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
+    new = r[t[:, None] + np.arange(AFTER - SETTLED + 1, AFTER + 1)[None, :]].mean(axis=1)
+    change = old - new
+    side = (change < 0).astype(np.int64)             # 0: towards bright, 1: dark
+    sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
+    e = np.broadcast_to(ep[t][:, None], change.shape)
+    np.add.at(d2, (e, side, sensor), change ** 2)
+    np.add.at(n, (e, side, sensor), 1.0)
+    for j in range(SAMPLES):
+        np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
     return {'tc_dd': dd, 'tc_d2': d2, 'tc_n': n}
 
 
@@ -93,8 +90,6 @@ def lone(u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray) -> np.n
     span = np.arange(-BEFORE, AFTER + 1)
     t = np.flatnonzero(u != 0)
     t = t[(t >= BEFORE) & (t + AFTER < len(u))]
-    if not t.size:
-        return t
     rows = t[:, None] + span[None, :]
     same = (ep[rows] == ep[t][:, None]).all(axis=1) & \
         (steps[rows] - steps[t][:, None] == span[None, :]).all(axis=1)
