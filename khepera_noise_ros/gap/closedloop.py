@@ -60,9 +60,9 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     w = _bands(u[ok])
     parts['scatter_n'] = sum_by(e, w, m)
     inside = w.any(axis=1)             # each row in its band's group only
-    band, bands = e[inside] * w.shape[1] + w[inside].argmax(axis=1), m * w.shape[1]
+    band = e[inside] * w.shape[1] + w[inside].argmax(axis=1)
     for name, y in (('xx', design), ('xy', dr)):
-        parts[f'scatter_{name}'] = _gram(band, design[inside], y[inside], bands) \
+        parts[f'scatter_{name}'] = _gram(band, design[inside], y[inside], m * w.shape[1]) \
             .reshape(m, w.shape[1], design.shape[1], -1)
     parts['scatter_yy'] = sum_by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
@@ -107,7 +107,7 @@ def wrap(deg: Array) -> Array:
 def _gram(group: np.ndarray, a: Array, b: Array, groups: int) -> Array:
     """(groups, ka, kb) sums of the outer products of the rows of ``a`` and ``b`` by group,
     one matrix product per group (never the (N, ka, kb) products)."""
-    if group.size and not np.all(group[1:] >= group[:-1]):
+    if not np.all(group[1:] >= group[:-1]):
         order = np.argsort(group, kind='stable')
         group, a, b = group[order], a[order], b[order]
     out = np.zeros((groups, a.shape[1], b.shape[1]))

@@ -201,8 +201,8 @@ def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[A
 
 def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:
     """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
-    (ar, cr, okr), (as_, cs, oks) = (tuple(np.concatenate([p[i] for p in parts])
-                                           for i in range(3)) for parts in (real, sim))
+    (ar, cr, okr), (as_, cs, oks) = ([np.concatenate(c) for c in zip(*parts)]
+                                     for parts in (real, sim))
     out = {}
     for k, s in enumerate(used):
         x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
@@ -334,11 +334,9 @@ def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, An
     for rec, runs_ in zip(real, change['runs']):
         x = rec.readings.astype(np.float64)
         for r, f in runs_:
-            x[r] = x[r] / f
-        for r, _ in runs_:
             cond, h = _cell(rec, r)
-            _add(sums, (cond, None if not np.isfinite(h) else f'heading {h:g} deg'),
-                 x[r].sum(axis=0), r.size)
+            _add(sums, (cond, f'heading {h:g} deg' if np.isfinite(h) else None),
+                 (x[r] / f).sum(axis=0), r.size)
     out = []
     for row in rows:
         found = sums.get((str(row.key.condition), row.key.part))
