@@ -70,8 +70,20 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
         dh = wrap(heading[t + 1] - heading[t])
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
         parts['heading_band'] = sum_by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
-    parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every,
-                              loop_only, tracked))
+    power = np.nan_to_num(rec.power[order], nan=1.0)
+    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
+    d, level = np.zeros_like(r), np.zeros_like(r)
+    d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
+    parts.update(_view('still', d, _onehot(level, still), still,
+                       still & np.r_[False, still[:-1]], ep, m, 0.5))  # var(d) = 2 var(noise)
+    # the change view stands in for the residual view on a robot nobody tracked; a
+    # simulated side always knows its headings: it gives both, the real side chooses
+    if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
+        parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
+    if tracked:
+        res, use, _ = residuals(r, heading, rec.condition[order], pair, m)
+        parts.update(_view('res', res, None, use, use & pair & np.r_[False, use[:-1]], ep, m,
+                           1.0))
     parts.update(more(order, ep, m))          # the converter's sums
     conditions = rec.conditions()
     first = rec.condition[order][np.r_[0, np.flatnonzero(np.diff(ep)) + 1]]
@@ -82,8 +94,7 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
 
 
 def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by the sorted ``ep``, in one sparse
-    product."""
+    """(episodes, ...) sums of ``values`` by the sorted ``ep``: one sparse product."""
     n = ep.size
     indptr = np.searchsorted(ep, np.arange(episodes + 1))
     pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
@@ -92,8 +103,7 @@ def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
 
 
 def imbalance(r: Array) -> Array:
-    """The front readings' imbalance, left (sensors 0-2) less right (3-5): what a turn
-    answers."""
+    """Left (sensors 0-2) less right (3-5) mean front reading: what a turn answers."""
     out: Array = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
     return out
 
@@ -122,25 +132,6 @@ def _bands(u: Array) -> Array:
     """(N, 3) one-hot band of each command's |power|."""
     p = np.abs(np.rint(u))
     return np.stack([(p >= lo) & (p <= hi) for lo, hi in POWER_BANDS], axis=1).astype(np.float64)
-
-
-def _noise_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, steps: np.ndarray,
-                 pair: np.ndarray, r: Array, perturb_every: int, loop_only: bool,
-                 tracked: bool) -> dict[str, Array]:
-    power = np.nan_to_num(rec.power[order], nan=1.0)
-    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
-    d, level = np.zeros_like(r), np.zeros_like(r)
-    d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
-    parts = _view('still', d, _onehot(level, still), still,
-                  still & np.r_[False, still[:-1]], ep, m, 0.5)  # var(d) = 2 var(noise)
-    # the change view stands in for the residual view on a robot nobody tracked; a
-    # simulated side always knows its headings: it gives both, the real side chooses
-    if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
-        parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
-    if tracked:
-        e, use, _ = residuals(r, rec.heading_deg[order], rec.condition[order], pair, m)
-        parts.update(_view('res', e, None, use, use & pair & np.r_[False, use[:-1]], ep, m, 1.0))
-    return parts
 
 
 def _onehot(level: Array, use: np.ndarray) -> Array:

@@ -132,11 +132,9 @@ def spread_cells(rows: Rows, level: dict[tuple[Any, ...], float], sensors: Seque
     neither exists (its regression takes part of the noise too)."""
     out = []
     if not closed_loop:
-        sim_level = {(r.key.sensors, r.key.condition, r.key.part): r.sim
-                     for r in reversed(rows('level'))}
-        out += [(sim_level[(r.key.sensors, r.key.condition, r.key.part)], r.real ** 2 - r.sim ** 2)
-                for r in rows('spread') if r.key.sensors[0] in sensors
-                and (r.key.sensors, r.key.condition, r.key.part) in sim_level]
+        sim_level = {r.key[1:]: r.sim for r in reversed(rows('level'))}   # (sensors, cell)
+        out += [(sim_level[r.key[1:]], r.real ** 2 - r.sim ** 2) for r in rows('spread')
+                if r.key.sensors[0] in sensors and r.key[1:] in sim_level]
     loop = [r for f in LOOP_SPREADS for r in rows(f)]
     direct = [r for r in loop if r.key.family != 'loop_change_spread']
     for r in direct or loop:

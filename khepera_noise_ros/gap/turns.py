@@ -44,12 +44,14 @@ def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episo
     ok = np.flatnonzero(_shown(consecutive(ep, steps), knock, u))
     onehot = (np.rint(u[ok])[:, None] == np.array(COMMANDS)[None, :]).astype(np.float64)
     front = imbalance(r)
-    change = front[ok + 1] - front[ok]
-    out = {'tc_imb': sum_by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
+    changes = {'tc_imb': front[ok + 1] - front[ok]}
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
-        dh = wrap(heading[ok + 1] - heading[ok])
-        out['tc_turn'] = sum_by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
+        changes['tc_turn'] = wrap(heading[ok + 1] - heading[ok])
+    out = {}
+    for name, v in changes.items():
+        moments = np.stack([np.ones_like(v), v, v * v], axis=1)
+        out[name] = sum_by(ep[ok], onehot[:, :, None] * moments[:, None, :], episodes)
     return {**out, **_settling(r, u, ep, steps, knock, episodes)}
 
 
@@ -58,10 +60,6 @@ def _shown(pair: np.ndarray, knock: np.ndarray, u: Array) -> np.ndarray:
     next step and no knock there (``pair``: ``protocol.consecutive``)."""
     out: np.ndarray = np.r_[pair[1:], False] & ~np.r_[knock[1:], False] & (u != 0)
     return out
-
-
-def _moments(v: Array) -> Array:
-    return np.stack([np.ones_like(v), v, v * v], axis=1)[:, None, :]
 
 
 def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray,
