@@ -237,7 +237,7 @@ def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
     n = np.bincount(cell, have.astype(np.float64))
     hc = at - (np.bincount(cell, have * at) / np.maximum(n, 1))[cell]
     near = (lag + 1, lag + 2) if lag == 0 else (lag + 1, lag - 1)
-    turns = [np.mod(_shift(h, j) - at + 180.0, 360.0) - 180.0 for j in near]
+    turns = [wrap(_shift(h, j) - at) for j in near]
     x = np.stack([np.ones_like(h), hc, hc * hc] + turns, axis=1)
     use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
     cells, w = int(cell.max()) + 1, use.astype(np.float64)
@@ -401,6 +401,5 @@ def _solve(a: Array, b: Array) -> Array:
     """Batched least squares that tolerates singular moment matrices (NaN there)."""
     out = np.full(b.shape, np.nan)
     ok = np.abs(np.linalg.det(a)) > 1e-9
-    if ok.any():
-        out[ok] = np.linalg.solve(a[ok], b[ok])
+    out[ok] = np.linalg.solve(a[ok], b[ok])
     return out

@@ -174,8 +174,7 @@ def _inferred(rec: Recording, sweeps: Sequence[Recording], config: Any, c: Array
     alone = lone(c, ep, steps, knock)
     alone = alone[~np.isfinite(h[alone + AFTER])]
     x = rec.readings[order][:, :8].astype(np.float64)
-    first = np.r_[0, np.flatnonzero(np.diff(ep)) + 1]
-    placed = h[first][np.searchsorted(first, alone, side='right') - 1]
+    placed = h[np.r_[0, np.flatnonzero(np.diff(ep)) + 1]][ep[alone]]   # episodes 0 .. m - 1
     out = []
     for i, place in zip(alone, placed):
         world = condition_world(rec, str(rec.condition[order][i]), config.world)
