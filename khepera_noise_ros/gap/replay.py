@@ -72,7 +72,7 @@ class Replayer:
 
     def _tiled(self, copies: int, shaped: tuple[Effect, ...]) -> Tiled:
         """The light of ``copies`` copies side by side; per replayed sample its row of the
-        light's (step, column) rows; the index columns; the noise model and scale."""
+        light's (step, column) rows; the index columns (arrays read-only); noise model, scale."""
         rec = self.rec
         light, noise, scale = self._lights.recall(shaped, lambda: self._light(shaped))
         episodes_, column = np.unique(rec.episode, return_inverse=True)
