@@ -176,8 +176,7 @@ class Own:
         n, sizes = self.n, self.sizes
         if not sizes.size or n < 3:
             return np.empty((0, len(OWN_LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
-        ref = np.zeros(n, bool)
-        ref[list(range(n)) if shared_by is None else list(shared_by)] = True
+        ref = np.ones(n, bool) if shared_by is None else np.isin(np.arange(n), shared_by)
         starts, y, level, left = self.starts, self.y, self.level, self.left
         e = own_part(y, ref, lambda v: np.add.reduceat(v, starts, axis=0), self.run)
         den = np.add.reduceat(e * e, starts, axis=0)
