@@ -88,8 +88,5 @@ def compare(real: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
         row = {'short_ratio': ratio[0], 'long_ratio': ratio[-1],
                'real_term': term(slope(real['taus'], r)),
                'simulated_term': term(slope(real['taus'], s))}
-        if key == 'shared':
-            out['shared'] = row
-        else:
-            out['sensors'][key] = row
+        (out if key == 'shared' else out['sensors'])[key] = row
     return out

@@ -45,8 +45,8 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
              'right': by((rec.direction[order] > 0)[:, None] * 1.0)}
     # the turn regression: rows j with j - 1, j, j + 1 consecutive and j + 1 no knock (the
     # knock, not the command, moves the heading there)
-    after = np.r_[pair[1:], False]
-    ok = np.flatnonzero(pair & after & (np.r_[steps[1:], 0] % perturb_every != 0))
+    after = np.r_[pair[1:], False] & (np.r_[steps[1:], 0] % perturb_every != 0)
+    ok = np.flatnonzero(pair & after)
     xr = np.stack([u[ok], u[ok - 1], np.ones(ok.size)], axis=1)
     dr = r[ok + 1] - r[ok]
     front = imbalance(r)
@@ -61,19 +61,29 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
     parts['scatter_n'] = sum_by(e, w, m)
     inside = w.any(axis=1)             # each row in its band's group only
     band = e[inside] * w.shape[1] + w[inside].argmax(axis=1)
-    shape = (m, w.shape[1], design.shape[1])
-    parts['scatter_xx'] = _gram(band, design[inside], design[inside], m * w.shape[1]) \
-        .reshape(shape + design.shape[1:])
-    parts['scatter_xy'] = _gram(band, design[inside], dr[inside], m * w.shape[1]) \
-        .reshape(shape + dr.shape[1:])
+    for name, y in (('xx', design), ('xy', dr)):
+        parts[f'scatter_{name}'] = _gram(band, design[inside], y[inside], m * w.shape[1]) \
+            .reshape(m, w.shape[1], design.shape[1], -1)
     parts['scatter_yy'] = sum_by(e, w * (dr * dr).sum(axis=1)[:, None], m)
     if tracked:           # the turn itself, per band: n, u^2, u dh, dh^2
-        t = np.flatnonzero(after & (np.r_[steps[1:], 0] % perturb_every != 0))
+        t = np.flatnonzero(after)
         dh = wrap(heading[t + 1] - heading[t])
         moments = np.stack([np.ones(t.size), u[t] ** 2, u[t] * dh, dh * dh], axis=1)
         parts['heading_band'] = sum_by(ep[t], _bands(u[t])[:, :, None] * moments[:, None, :], m)
-    parts.update(_noise_parts(rec, order, ep, m, steps, pair, r, perturb_every,
-                              loop_only, tracked))
+    power = np.nan_to_num(rec.power[order], nan=1.0)
+    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
+    d, level = np.zeros_like(r), np.zeros_like(r)
+    d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
+    parts.update(_view('still', d, _onehot(level, still), still,
+                       still & np.r_[False, still[:-1]], ep, m, 0.5))  # var(d) = 2 var(noise)
+    # the change view stands in for the residual view on a robot nobody tracked; a
+    # simulated side always knows its headings: it gives both, the real side chooses
+    if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
+        parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
+    if tracked:
+        res, use, _ = residuals(r, heading, rec.condition[order], pair, m)
+        parts.update(_view('res', res, None, use, use & pair & np.r_[False, use[:-1]], ep, m,
+                           1.0))
     parts.update(more(order, ep, m))          # the converter's sums
     conditions = rec.conditions()
     first = rec.condition[order][np.r_[0, np.flatnonzero(np.diff(ep)) + 1]]
@@ -84,20 +94,16 @@ def blocks(rec: Recording, x: Array, more: Callable[..., dict[str, Array]], pert
 
 
 def sum_by(ep: np.ndarray, values: AnyArray, episodes: int) -> Array:
-    """(episodes, ...) sums of the (N, ...) ``values`` by ``ep``, in one sparse product."""
+    """(episodes, ...) sums of ``values`` by the sorted ``ep``: one sparse product."""
     n = ep.size
-    if n and np.all(ep[1:] >= ep[:-1]):
-        indptr = np.searchsorted(ep, np.arange(episodes + 1))
-        pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
-    else:
-        pick = sparse.csr_matrix((np.ones(n), (ep, np.arange(n))), shape=(episodes, n))
+    indptr = np.searchsorted(ep, np.arange(episodes + 1))
+    pick = sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(episodes, n))
     out: Array = np.asarray(pick @ values.reshape(n, -1), np.float64)
     return out.reshape((episodes,) + values.shape[1:])
 
 
 def imbalance(r: Array) -> Array:
-    """The front readings' imbalance, left (sensors 0-2) less right (3-5): what a turn
-    answers."""
+    """Left (sensors 0-2) less right (3-5) mean front reading: what a turn answers."""
     out: Array = r[:, 0:3].mean(axis=1) - r[:, 3:6].mean(axis=1)
     return out
 
@@ -111,7 +117,7 @@ def wrap(deg: Array) -> Array:
 def _gram(group: np.ndarray, a: Array, b: Array, groups: int) -> Array:
     """(groups, ka, kb) sums of the outer products of the rows of ``a`` and ``b`` by group,
     one matrix product per group (never the (N, ka, kb) products)."""
-    if group.size and not np.all(group[1:] >= group[:-1]):
+    if not np.all(group[1:] >= group[:-1]):
         order = np.argsort(group, kind='stable')
         group, a, b = group[order], a[order], b[order]
     out = np.zeros((groups, a.shape[1], b.shape[1]))
@@ -126,25 +132,6 @@ def _bands(u: Array) -> Array:
     """(N, 3) one-hot band of each command's |power|."""
     p = np.abs(np.rint(u))
     return np.stack([(p >= lo) & (p <= hi) for lo, hi in POWER_BANDS], axis=1).astype(np.float64)
-
-
-def _noise_parts(rec: Recording, order: np.ndarray, ep: np.ndarray, m: int, steps: np.ndarray,
-                 pair: np.ndarray, r: Array, perturb_every: int, loop_only: bool,
-                 tracked: bool) -> dict[str, Array]:
-    power = np.nan_to_num(rec.power[order], nan=1.0)
-    still = pair & np.r_[False, power[:-1] == 0] & (steps % perturb_every != 0)
-    d, level = np.zeros_like(r), np.zeros_like(r)
-    d[1:], level[1:] = r[1:] - r[:-1], (r[1:] + r[:-1]) / 2
-    parts = _view('still', d, _onehot(level, still), still,
-                  still & np.r_[False, still[:-1]], ep, m, 0.5)  # var(d) = 2 var(noise)
-    # the change view stands in for the residual view on a robot nobody tracked; a
-    # simulated side always knows its headings: it gives both, the real side chooses
-    if loop_only and (not tracked or rec.manifest.get('source') == 'simulator'):
-        parts.update(_change_parts(rec, order, ep, m, steps, pair, r, power, perturb_every))
-    if tracked:
-        e, use, _ = residuals(r, rec.heading_deg[order], rec.condition[order], pair, m)
-        parts.update(_view('res', e, None, use, use & pair & np.r_[False, use[:-1]], ep, m, 1.0))
-    return parts
 
 
 def _onehot(level: Array, use: np.ndarray) -> Array:
@@ -250,7 +237,7 @@ def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
     n = np.bincount(cell, have.astype(np.float64))
     hc = at - (np.bincount(cell, have * at) / np.maximum(n, 1))[cell]
     near = (lag + 1, lag + 2) if lag == 0 else (lag + 1, lag - 1)
-    turns = [np.mod(_shift(h, j) - at + 180.0, 360.0) - 180.0 for j in near]
+    turns = [wrap(_shift(h, j) - at) for j in near]
     x = np.stack([np.ones_like(h), hc, hc * hc] + turns, axis=1)
     use = have & (n[cell] >= max(BIN_DENSITY * episodes, REGRESSORS + 2))
     cells, w = int(cell.max()) + 1, use.astype(np.float64)
@@ -266,10 +253,7 @@ def _fit(r: Array, h: Array, cond: np.ndarray, have: np.ndarray, lag: int,
 
 
 def _shift(h: Array, lag: int) -> Array:
-    if lag == 0:
-        return h
-    out = np.zeros_like(h)
-    out[lag:] = h[:-lag]
+    out: Array = np.r_[np.zeros(lag), h[:h.size - lag]]
     return out
 
 
@@ -417,6 +401,5 @@ def _solve(a: Array, b: Array) -> Array:
     """Batched least squares that tolerates singular moment matrices (NaN there)."""
     out = np.full(b.shape, np.nan)
     ok = np.abs(np.linalg.det(a)) > 1e-9
-    if ok.any():
-        out[ok] = np.linalg.solve(a[ok], b[ok])
+    out[ok] = np.linalg.solve(a[ok], b[ok])
     return out

@@ -2,7 +2,6 @@
 (sum of max(|z| - 2, 0)^2), and where the gap lies."""
 from __future__ import annotations
 
-import copy
 import functools
 import warnings
 from dataclasses import dataclass, field
@@ -142,12 +141,11 @@ def compare(real: Stats, sim: Stats, inflation: Array | None = None) -> Comparis
     """The statistics both share, their differences standardised; ``inflation`` (aligned
     with ``sim.keys``) scales both variances where the bootstrap understates them."""
     where = sim.index
-    pairs = [(i, where[k]) for i, k in enumerate(real.keys) if k in where]
-    ri = np.array([p[0] for p in pairs], np.int64)
-    si = np.array([p[1] for p in pairs], np.int64)
+    ri = np.array([i for i, k in enumerate(real.keys) if k in where], np.int64)
+    keys = [real.keys[i] for i in ri]
+    si = np.array([where[k] for k in keys], np.int64)
     r, s = real.estimate[ri], sim.estimate[si]
     scale = 1.0 if inflation is None else inflation[si]
-    keys = [real.keys[i] for i in ri]
     se = np.sqrt((real.variance[ri] + sim.variance[si]) * scale + floors(keys))
     ok = np.flatnonzero(np.isfinite(r) & np.isfinite(s) & np.isfinite(se))
     z = np.clip((r[ok] - s[ok]) / se[ok], -Z_CAP, Z_CAP)
@@ -166,8 +164,7 @@ def entries(c: Comparison, limit: int = 40, alpha: float = ALPHA) -> list[dict[s
 
 
 def localise(c: Comparison, alpha: float = ALPHA) -> dict[str, dict[str, float]]:
-    """Which families, sensors, pairs, conditions and parts carry the significant
-    discrepancy, each with its share."""
+    """The shares of the significant discrepancy by family, sensor, pair, condition, part."""
     weight = np.clip(np.abs(c.z) - MARGIN, 0.0, None) ** 2 * c.significant(alpha)
     total = weight.sum()
     out: dict[str, dict[str, float]] = {k: {} for k in ('families', 'sensors', 'pairs',
@@ -212,12 +209,9 @@ def recount(c: Comparison, real: dict[Key, list[float]],
             and real[k][1] > 0 and sim[k][1] > 0]
     if not rows:
         return c
-    out = copy.copy(c)
-    out.real, out.sim, out.se, out.z = (np.array(v, np.float64)
-                                        for v in (c.real, c.sim, c.se, c.z))
-    out._families = None
+    real_, sim_, se, z = (np.array(v, np.float64) for v in (c.real, c.sim, c.se, c.z))
     for i in rows:
         (r, n_r), (s, n_s) = real[c.keys[i]], sim[c.keys[i]]
-        out.z[i], out.se[i] = test(r, n_r, s, n_s)
-        out.real[i], out.sim[i] = r / n_r, s / n_s
-    return out
+        z[i], se[i] = test(r, n_r, s, n_s)
+        real_[i], sim_[i] = r / n_r, s / n_s
+    return Comparison(c.keys, real_, sim_, se, z)

@@ -61,12 +61,7 @@ def stationary_sums(x: Array, marks: Array, cell: np.ndarray, order: np.ndarray,
     """Sums by ``total``'s groups (of the samples ``order`` keeps) of the statistics."""
     o, c = order, x.shape[1]
     low, high = (x.min(), x.max()) if x.size else (np.nan, np.nan)
-    if np.isfinite(low) and np.isfinite(high):
-        whole = np.all(x == np.round(x)) and high - low < 1e5
-    else:                                   # NaN or infinite readings
-        low = np.nanmin(x) if np.isfinite(x).any() else 0.0
-        whole = np.all(x == np.round(x)) and np.nanmax(x) - low < 1e5
-    if not whole:
+    if not (np.isfinite(low) and high - low < 1e5 and np.all(x == np.round(x))):
         return {'edge': total(edge_hits(x)[o]), 'dropped': _dropped(marks, order, total)}
     # whole readings: everything from histograms of values (cell by channel)
     xi = (x - low).astype(np.int64)
@@ -254,10 +249,10 @@ def limits(real: Array, sim: Array, sensors: Sequence[int],
         values, count = np.unique(x, return_counts=True)
         if values.size == 0 or y.size == 0:
             continue
-        ends: list[tuple[Any, ...] | None] = \
-            [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])] \
-            if values.size > 1 else [(values[0], count[0], 0)] * 2
-        if values.size == 1:      # held at one value: the limit on the side the simulator passes
+        ends: list[tuple[Any, ...] | None] = [(values[0], count[0], 0)] * 2
+        if values.size > 1:
+            ends = [(values[0], count[0], count[1]), (values[-1], count[-1], count[-2])]
+        else:       # held at one value: the limit on the side the simulator passes
             ends[int(np.mean(y > values[0]) < np.mean(y < values[0]))] = None
         for end, found_ in enumerate(ends):
             if found_ is None or found_[0] == reading_range[end]:

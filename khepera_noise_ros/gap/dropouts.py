@@ -34,14 +34,7 @@ class Runs:
         self.run_of = np.repeat(np.arange(len(kept)), self.sizes)
         self.place = np.full(samples, -1)
         self.place[self.order] = np.arange(self.order.size)
-        self._near: np.ndarray | None = None
-
-    @property
-    def near(self) -> np.ndarray:
-        """(4, N) the samples that are every position's ``NEAR`` neighbours, made once."""
-        if self._near is None:
-            self._near = self.order[_neighbours(self, NEAR)]
-        return self._near
+        self.near = self.order[_neighbours(self, NEAR)]     # (4, N) each one's NEAR samples
 
 
 def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray, Array]:
@@ -61,8 +54,8 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
     group = np.repeat(np.arange(len(found)), [i.size for i in found])
     at = np.concatenate(found)
     if moving:             # a value held for stretches is a limit the light reaches
-        held = {int(g) for g in np.unique(group) if _stretched(at[group == g], runs.run_of)}
-        keep = ~np.isin(group, list(held))
+        held = [g for g in np.unique(group) if _stretched(at[group == g], runs.run_of)]
+        keep = ~np.isin(group, held)
         group, at = group[keep], at[keep]
     keep = ~_flanked(at, runs.run_of, group)
     group, at = group[keep], at[keep]
@@ -166,8 +159,7 @@ def _neighbours(runs: Runs, offsets: tuple[int, ...], at: np.ndarray | None = No
     """(offsets, N) each position's neighbours in its run (reflected at its ends)."""
     at = np.arange(runs.run_of.size) if at is None else at
     start, n = runs.first[runs.run_of[at]], runs.sizes[runs.run_of[at]]
-    j = (at - start)[None, :] + np.array(offsets)[:, None]
-    j = np.where(j < 0, -j, j)
+    j = np.abs((at - start)[None, :] + np.array(offsets)[:, None])
     j = np.where(j >= n, 2 * (n - 1) - j, j)
     out: np.ndarray = start + np.clip(j, 0, n - 1)
     return out
@@ -193,9 +185,7 @@ def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None
 def _stretched(i: np.ndarray, run_of: np.ndarray) -> bool:
     """Do the readings at a value come in stretches (a limit the light holds)?"""
     pair = _adjacent(i, run_of)
-    beside = np.zeros(i.size, bool)
-    beside[1:] |= pair
-    beside[:-1] |= pair
+    beside = np.r_[False, pair] | np.r_[pair, False]
     return bool(beside.sum() > STRETCHED * i.size)
 
 
@@ -333,10 +323,9 @@ def seen_share(repaired: Sequence[Any], sensors: Sequence[int]) -> float:
     """The share of dropouts marked among the ``sensors``' readings."""
     hits = total = 0.0
     for r in repaired:
-        h, n, _ = _marked(r, list(r.recording.channels_used))
-        used = [list(r.recording.channels_used).index(s) for s in sensors]
-        hits += h[used].sum()
-        total += n[used].sum()
+        h, n, _ = _marked(r, list(sensors))
+        hits += h.sum()
+        total += n.sum()
     return hits / max(total, 1.0)
 
 

@@ -132,11 +132,9 @@ def spread_cells(rows: Rows, level: dict[tuple[Any, ...], float], sensors: Seque
     neither exists (its regression takes part of the noise too)."""
     out = []
     if not closed_loop:
-        sim_level = {(r.key.sensors, r.key.condition, r.key.part): r.sim
-                     for r in reversed(rows('level'))}
-        out += [(sim_level[(r.key.sensors, r.key.condition, r.key.part)], r.real ** 2 - r.sim ** 2)
-                for r in rows('spread') if r.key.sensors[0] in sensors
-                and (r.key.sensors, r.key.condition, r.key.part) in sim_level]
+        sim_level = {r.key[1:]: r.sim for r in reversed(rows('level'))}   # (sensors, cell)
+        out += [(sim_level[r.key[1:]], r.real ** 2 - r.sim ** 2) for r in rows('spread')
+                if r.key.sensors[0] in sensors and r.key[1:] in sim_level]
     loop = [r for f in LOOP_SPREADS for r in rows(f)]
     direct = [r for r in loop if r.key.family != 'loop_change_spread']
     for r in direct or loop:
@@ -178,8 +176,7 @@ class Own:
         n, sizes = self.n, self.sizes
         if not sizes.size or n < 3:
             return np.empty((0, len(OWN_LAGS), n)), np.empty((0, n)), np.empty((0, n), bool)
-        ref = np.zeros(n, bool)
-        ref[list(range(n)) if shared_by is None else list(shared_by)] = True
+        ref = np.ones(n, bool) if shared_by is None else np.isin(np.arange(n), shared_by)
         starts, y, level, left = self.starts, self.y, self.level, self.left
         e = own_part(y, ref, lambda v: np.add.reduceat(v, starts, axis=0), self.run)
         den = np.add.reduceat(e * e, starts, axis=0)
@@ -201,8 +198,8 @@ def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[A
 
 def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:
     """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
-    (ar, cr, okr), (as_, cs, oks) = (tuple(np.concatenate([p[i] for p in parts])
-                                           for i in range(3)) for parts in (real, sim))
+    (ar, cr, okr), (as_, cs, oks) = ([np.concatenate(c) for c in zip(*parts)]
+                                     for parts in (real, sim))
     out = {}
     for k, s in enumerate(used):
         x, y = ar[okr[:, k], :, k].mean(axis=1), as_[oks[:, k], :, k].mean(axis=1)
@@ -334,11 +331,9 @@ def steady_rows(rows: list[Row], real: Sequence[Recording], change: dict[str, An
     for rec, runs_ in zip(real, change['runs']):
         x = rec.readings.astype(np.float64)
         for r, f in runs_:
-            x[r] = x[r] / f
-        for r, _ in runs_:
             cond, h = _cell(rec, r)
-            _add(sums, (cond, None if not np.isfinite(h) else f'heading {h:g} deg'),
-                 x[r].sum(axis=0), r.size)
+            _add(sums, (cond, f'heading {h:g} deg' if np.isfinite(h) else None),
+                 (x[r] / f).sum(axis=0), r.size)
     out = []
     for row in rows:
         found = sums.get((str(row.key.condition), row.key.part))

@@ -50,9 +50,8 @@ def runs(rec: Recording) -> list[np.ndarray]:
 
 def episodes(rec: Recording) -> list[np.ndarray]:
     """Sample indices of each episode in step order."""
-    _, ep = np.unique(rec.episode, return_inverse=True)
-    order = np.lexsort((rec.step, ep))
-    return np.split(order, np.flatnonzero(np.diff(ep[order])) + 1)
+    _, ep, order, _, _ = ordered(rec)
+    return np.split(order, np.flatnonzero(np.diff(ep)) + 1)
 
 
 def condition_world(rec: Recording, label: str, base: World) -> World:
@@ -144,7 +143,6 @@ def ordered(rec: Recording) -> tuple[np.ndarray, ...]:
 
 
 def consecutive(ep: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Per sample in episode and step order: it and the one before are consecutive steps
-    of one episode."""
+    """Per sample (in episode and step order): is the one before the step before it?"""
     out: np.ndarray = np.r_[False, (ep[1:] == ep[:-1]) & (steps[1:] == steps[:-1] + 1)]
     return out

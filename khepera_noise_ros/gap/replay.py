@@ -19,6 +19,8 @@ from .protocol import (ProtocolError, base_mode, calibrating, condition_world, g
                        runs)
 from ..simconfig import SimConfig
 
+Tiled = tuple[Array, np.ndarray, dict[str, Any], NoiseModel, float]
+
 
 class Replayer:
     """Replays of one recording's protocol under one configuration.  What every replay
@@ -30,29 +32,25 @@ class Replayer:
         self.rec, self.config, self.kind = rec, config, kind(rec)
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
         self.cache = cache if cache is not None else SimCache()
-        self._light: Recent[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = Recent(8)
-        self._copies: Recent[tuple[Any, ...], tuple[Array, np.ndarray, dict[str, Any]]] = \
-            Recent(8)
+        self._lights: Recent[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = Recent(8)
+        self._copies: Recent[tuple[Any, ...], Tiled] = Recent(8)
 
     def replay(self, effects: Sequence[Effect] = (), seed: int = 0, copies: int = 1) -> Recording:
         effects = tuple(self.config.effects) + tuple(effects)
         if self.kind == 'closed_loop':
             return self._closed_loop(effects, seed, copies)
         shaped = tuple(staged(effects, Stage.WORLD)) if self.mode == 'model' else ()
-        light, noise, scale = self.light(shaped)
-        tiled, at, index = self.copies(copies, shaped)
+        tiled, at, index, noise, scale = self._copies.recall(
+            (copies, shaped), lambda: self._tiled(copies, shaped))
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
         readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at]
         if scale != 1.0:
             readings = readings * scale
         return Recording(**index, readings=readings, manifest=self._manifest())
 
-    def light(self, shaped: tuple[Effect, ...] = ()) -> tuple[Array, NoiseModel, float]:
+    def _light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
         """(samples, channels, episodes) light of every step, the noise model, the scale,
         in the world the world-stage effects ``shaped`` make."""
-        return self._light.recall(shaped, lambda: self._make_light(shaped))
-
-    def _make_light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
         rec, config = self.rec, self.config
         episodes_, column = np.unique(rec.episode, return_inverse=True)
         light = np.full((int(rec.step.max()) + 1, rec.channels, episodes_.size), np.nan)
@@ -72,18 +70,13 @@ class Replayer:
             noise = dataclasses.replace(noise, groups=groups)
         return _hold(light) / scale, noise, scale
 
-    def copies(self, copies: int, shaped: tuple[Effect, ...] = ()
-               ) -> tuple[Array, np.ndarray, dict[str, Any]]:
-        """(the light of ``copies`` copies side by side, read-only; per replayed sample its
-        step and column as a row of the light's (step, column) rows; the index columns)."""
-        return self._copies.recall((copies, shaped), lambda: self._tiled(copies, shaped))
-
-    def _tiled(self, copies: int, shaped: tuple[Effect, ...]
-               ) -> tuple[Array, np.ndarray, dict[str, Any]]:
+    def _tiled(self, copies: int, shaped: tuple[Effect, ...]) -> Tiled:
+        """The light of ``copies`` copies side by side; per replayed sample its row of the
+        light's (step, column) rows; the index columns (arrays read-only); noise model, scale."""
         rec = self.rec
+        light, noise, scale = self._lights.recall(shaped, lambda: self._light(shaped))
         episodes_, column = np.unique(rec.episode, return_inverse=True)
-        tiled = np.tile(self.light(shaped)[0], (1, 1, copies))
-        tiled.flags.writeable = False
+        tiled = np.tile(light, (1, 1, copies))
         span = int(rec.episode.max()) + 1
         index = {'episode': np.concatenate([rec.episode + k * span for k in range(copies)]),
                  'step': np.tile(rec.step, copies),
@@ -91,17 +84,15 @@ class Replayer:
                  'condition': np.tile(rec.condition, copies),
                  'direction': np.full(len(rec) * copies, np.nan),
                  'power': np.full(len(rec) * copies, np.nan)}
-        for value in index.values():
+        for value in (tiled, *index.values()):
             value.flags.writeable = False
         at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
             [column + k * episodes_.size for k in range(copies)])
-        return tiled, at, index
+        return tiled, at, index, noise, scale
 
     def _manifest(self) -> dict[str, Any]:
-        manifest = {k: v for k, v in self.rec.manifest.items()
-                    if k not in ('source', 'samples', 'lost_steps')}
-        manifest['source'] = 'simulator'
-        return manifest
+        return {**{k: v for k, v in self.rec.manifest.items()
+                   if k not in ('source', 'samples', 'lost_steps')}, 'source': 'simulator'}
 
     def _closed_loop(self, effects: tuple[Effect, ...], seed: int, copies: int) -> Recording:
         rec, config = self.rec, self.config
@@ -120,22 +111,17 @@ class Replayer:
                 task = dataclasses.replace(task, perturbation_deg=0.0)
             env = EffectEpisodes(condition_world(rec, label, config.world), config.noise, task,
                                  effects)
-            n = episodes_.size * copies
-            seeds = np.random.SeedSequence([seed, ci]).generate_state(n, np.uint64) \
-                >> np.uint64(11)
+            seeds = (np.random.SeedSequence([seed, ci]).generate_state(
+                episodes_.size * copies, np.uint64) >> np.uint64(11)).astype(np.int64)
             ids = np.concatenate([episodes_ + k * span for k in range(copies)])
-            parts.append(run_calibration(env, rec, episodes_, seeds.astype(np.int64), ids, label)
-                         if genome is None else
-                         _run(env, genome, seeds.astype(np.int64), ids, label))
+            if genome is None:
+                parts.append(run_calibration(env, rec, episodes_, seeds, ids, label))
+            else:
+                w = network.unpack(np.repeat(genome[None], seeds.size, axis=0))
+                parts.append(_episodes(env, seeds, None, lambda t, x: network.act(w, x), ids,
+                                       label))
         cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         return Recording(**cols, manifest=self._manifest())
-
-
-def _run(env: EffectEpisodes, genome: Array, seeds: np.ndarray, episode: np.ndarray,
-         label: str) -> dict[str, np.ndarray]:
-    w = network.unpack(np.repeat(genome[None], seeds.size, axis=0))
-    return _episodes(env, seeds, None, lambda t, readings: network.act(w, readings), episode,
-                     label)
 
 
 def _episodes(env: EffectEpisodes, seeds: np.ndarray, bearing_deg: Array | None,
@@ -149,24 +135,21 @@ def _episodes(env: EffectEpisodes, seeds: np.ndarray, bearing_deg: Array | None,
         direction, power = command(len(rows), readings)
         rows.append((env.bearing_deg.copy(), readings.copy(), direction, power))
         readings = env.step(direction, power)
+    heading, x, direction, power = (np.stack(column, axis=1) for column in zip(*rows))
     n, t = seeds.size, len(rows)
     return {'episode': np.repeat(episode, t), 'step': np.tile(np.arange(t), n),
-            'heading_deg': np.stack([r[0] for r in rows], axis=1).ravel(),
-            'condition': np.full(n * t, label),
-            'readings': np.stack([r[1] for r in rows], axis=1).reshape(n * t, -1)
-            .astype(np.float64),
-            'direction': np.stack([r[2] for r in rows], axis=1).ravel().astype(np.float64),
-            'power': np.stack([r[3] for r in rows], axis=1).ravel().astype(np.float64)}
+            'heading_deg': heading.ravel(), 'condition': np.full(n * t, label),
+            'readings': x.reshape(n * t, -1).astype(np.float64),
+            'direction': direction.ravel().astype(np.float64),
+            'power': power.ravel().astype(np.float64)}
 
 
 def _hold(light: Array) -> Array:
     """Fill steps a recording lacks with the light of the last step it has (else the next)."""
-    for t in range(1, light.shape[0]):
-        gap = np.isnan(light[t])
-        light[t][gap] = light[t - 1][gap]
-    for t in range(light.shape[0] - 2, -1, -1):
-        gap = np.isnan(light[t])
-        light[t][gap] = light[t + 1][gap]
+    for view in (light, light[::-1]):
+        for t in range(1, view.shape[0]):
+            gap = np.isnan(view[t])
+            view[t][gap] = view[t - 1][gap]
     out: Array = np.nan_to_num(light)
     return out
 

@@ -26,8 +26,7 @@ def by_episode(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
 
 def split(recordings: Sequence[Recording], held_out: Sequence[str] | None = None
           ) -> tuple[list[tuple[int, Recording]], list[tuple[int, Recording]]]:
-    """(fit, held-out): lists of (index of the source recording, part); a recording with no
-    samples on a side is left out of that side."""
+    """(fit, held-out) lists of (source index, part); a recording's empty side left out."""
     fit: list[tuple[int, Recording]] = []
     test: list[tuple[int, Recording]] = []
     for i, rec in enumerate(recordings):

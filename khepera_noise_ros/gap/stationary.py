@@ -27,8 +27,7 @@ def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
     pairs = np.stack([cond, np.where(np.isfinite(heading), heading, np.inf)], axis=1)
     unique, first, index = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
+    rank = np.argsort(order)                    # each cell's place in order of appearance
     labels = [(str(conditions[int(unique[i, 0])]),
                float(unique[i, 1]) if np.isfinite(unique[i, 1]) else None) for i in order]
     return labels, rank[index.ravel()]
@@ -113,25 +112,20 @@ class Layout:
     replay of a protocol with as many copies (replays share their index columns)."""
 
     def __init__(self, rec: Recording, length: int):
-        self.labels, cell = cells(rec)
-        self.cell = cell
-        self.runs = units(rec, cell)
-        sizes = np.array([r.size for r in self.runs], np.int64)
-        self.run_order = np.concatenate(self.runs)
+        self.labels, self.cell = cells(rec)
+        runs = units(rec, self.cell)
+        self.run_sizes = sizes = np.array([r.size for r in runs], np.int64)
+        run_order, run = np.concatenate(runs), np.repeat(np.arange(len(runs)), sizes)
         self.run_of = np.empty(len(rec), np.int64)
-        self.run_of[self.run_order] = np.repeat(np.arange(len(self.runs)), sizes)
-        self.run_starts = np.r_[0, np.cumsum(sizes)[:-1]]
-        self.run_sizes = sizes
+        self.run_of[run_order] = run
         position = np.concatenate([np.arange(n) for n in sizes])
-        key = np.repeat(np.arange(len(self.runs)), sizes) * (position.max() // length + 2) \
-            + position // length
+        key = run * (position.max() // length + 2) + position // length
         _, chunk = np.unique(key, return_inverse=True)
         keep = np.bincount(chunk)[chunk] >= 2            # a lone sample carries no spread
-        kept, chunk = self.run_order[keep], np.unique(chunk[keep], return_inverse=True)[1]
+        kept, chunk = run_order[keep], np.unique(chunk[keep], return_inverse=True)[1]
         stratum_of_chunk = np.zeros(int(chunk.max()) + 1 if chunk.size else 0, np.int64)
-        stratum_of_chunk[chunk] = cell[kept]
-        rank = np.empty_like(stratum_of_chunk)           # blocks in stratum order
-        rank[np.argsort(stratum_of_chunk, kind='stable')] = np.arange(rank.size)
+        stratum_of_chunk[chunk] = self.cell[kept]
+        rank = np.argsort(np.argsort(stratum_of_chunk, kind='stable'))   # blocks by stratum
         block = rank[chunk]
         by = np.argsort(block, kind='stable')
         self.order, block = kept[by], block[by]          # kept samples, block by block
@@ -142,11 +136,10 @@ class Layout:
         self.by_stratum = Grouping(stratum[block], strata, np.arange(strata), stratum, self.lags)
         block_of = np.full(len(rec), -1)
         block_of[self.order] = block
-        self.changes = _changes(rec, self.runs, block_of)
+        self.changes = _changes(rec, runs, block_of)
         self.own_kept = np.zeros((len(rec), 1), np.float32)    # in sample order
-        self.own_kept[self.run_order, 0] = position >= SKIP
-        self.by_run = Grouping(self.run_of, len(self.runs), np.arange(len(self.runs)),
-                               np.arange(len(self.runs)))
+        self.own_kept[run_order, 0] = position >= SKIP
+        self.by_run = Grouping(self.run_of, len(runs), np.arange(len(runs)), np.arange(len(runs)))
 
 
 def sums(lay: Layout, x: Array, total: Grouping) -> dict[str, Array]:
@@ -279,14 +272,14 @@ def keys(strata: tuple[tuple[str, float | None], ...], ch: tuple[int, ...],
 def _lag_pairs(steps: np.ndarray, run: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, bool]]:
     """Per lag, (hit, partner, shifted): samples with a partner ``lag`` steps later in their
     run, and whether every partner lies ``lag`` rows on."""
-    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps \
-        if steps.size else steps.astype(np.int64)
+    if not steps.size:
+        return [(np.zeros(0, bool), np.zeros(0, np.int64), False) for _ in LAGS]
+    key = run.astype(np.int64) * (int(steps.max()) + max(LAGS) + 2) + steps
     sorter = np.argsort(key)
     out = []
     for lag in LAGS:
-        at = np.minimum(np.searchsorted(key, key + lag, sorter=sorter), max(key.size - 1, 0))
-        partner = sorter[at] if key.size else at
-        hit = key[partner] == key + lag if key.size else np.zeros(0, bool)
+        partner = sorter[np.minimum(np.searchsorted(key, key + lag, sorter=sorter), key.size - 1)]
+        hit = key[partner] == key + lag
         out.append((hit, partner, partner.size > lag and np.array_equal(
             partner[:-lag][hit[:-lag]], np.flatnonzero(hit[:-lag]) + lag)))
     return out
@@ -312,8 +305,7 @@ def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tu
 
 def blocks(rec: Recording, x: Array, lay: Layout, total: Grouping,
            more: dict[str, Array]) -> bootstrap.Blocks:
-    """The ``Blocks`` of a stationary recording grouped by ``total``: these sums and
-    ``more`` (the converter's)."""
+    """The ``Blocks`` of a stationary recording: its sums by ``total`` and ``more``."""
     table, layout = bootstrap.pack({**sums(lay, x, total), **more})
     return bootstrap.Blocks('stationary', tuple(rec.channels_used), lay.labels, total.strata,
                             table, layout)

@@ -29,9 +29,7 @@ MARGIN = 10.0              # degrees searched beyond twice the commanded turn
 def knocks(rec: Recording, steps: np.ndarray, every: int) -> np.ndarray:
     """The rows a knock moves: none when the recording's task has no knock."""
     task = rec.manifest.get('task') or {}
-    if float(task.get('perturbation_deg', 1.0)) == 0.0:
-        return np.zeros(len(steps), bool)
-    out: np.ndarray = steps % int(every) == 0
+    out: np.ndarray = (steps % int(every) == 0) & (float(task.get('perturbation_deg', 1.0)) != 0)
     return out
 
 
@@ -46,12 +44,14 @@ def loop_sums(rec: Recording, x: Array, order: np.ndarray, ep: np.ndarray, episo
     ok = np.flatnonzero(_shown(consecutive(ep, steps), knock, u))
     onehot = (np.rint(u[ok])[:, None] == np.array(COMMANDS)[None, :]).astype(np.float64)
     front = imbalance(r)
-    change = front[ok + 1] - front[ok]
-    out = {'tc_imb': sum_by(ep[ok], onehot[:, :, None] * _moments(change), episodes)}
+    changes = {'tc_imb': front[ok + 1] - front[ok]}
     heading = rec.heading_deg[order]
     if np.isfinite(heading).all():
-        dh = wrap(heading[ok + 1] - heading[ok])
-        out['tc_turn'] = sum_by(ep[ok], onehot[:, :, None] * _moments(dh), episodes)
+        changes['tc_turn'] = wrap(heading[ok + 1] - heading[ok])
+    out = {}
+    for name, v in changes.items():
+        moments = np.stack([np.ones_like(v), v, v * v], axis=1)
+        out[name] = sum_by(ep[ok], onehot[:, :, None] * moments[:, None, :], episodes)
     return {**out, **_settling(r, u, ep, steps, knock, episodes)}
 
 
@@ -62,10 +62,6 @@ def _shown(pair: np.ndarray, knock: np.ndarray, u: Array) -> np.ndarray:
     return out
 
 
-def _moments(v: Array) -> Array:
-    return np.stack([np.ones_like(v), v, v * v], axis=1)[:, None, :]
-
-
 def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray,
               episodes: int) -> dict[str, Array]:
     """Per side of each sensor's change over a lone turn, the products (reading after -
@@ -73,17 +69,16 @@ def _settling(r: Array, u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.n
     dd = np.zeros((episodes, 2, SAMPLES, r.shape[1]))
     d2, n = np.zeros((episodes, 2, r.shape[1])), np.zeros((episodes, 2, r.shape[1]))
     t = lone(u, ep, steps, knock)
-    if t.size:
-        old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
-        new = r[t[:, None] + np.arange(AFTER - SETTLED + 1, AFTER + 1)[None, :]].mean(axis=1)
-        change = old - new
-        side = (change < 0).astype(np.int64)             # 0: towards bright, 1: dark
-        sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
-        e = np.broadcast_to(ep[t][:, None], change.shape)
-        np.add.at(d2, (e, side, sensor), change ** 2)
-        np.add.at(n, (e, side, sensor), 1.0)
-        for j in range(SAMPLES):
-            np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
+    old = r[t[:, None] + np.arange(-BEFORE, 1)[None, :]].mean(axis=1)
+    new = r[t[:, None] + np.arange(AFTER - SETTLED + 1, AFTER + 1)[None, :]].mean(axis=1)
+    change = old - new
+    side = (change < 0).astype(np.int64)             # 0: towards bright, 1: dark
+    sensor = np.broadcast_to(np.arange(r.shape[1]), change.shape)
+    e = np.broadcast_to(ep[t][:, None], change.shape)
+    np.add.at(d2, (e, side, sensor), change ** 2)
+    np.add.at(n, (e, side, sensor), 1.0)
+    for j in range(SAMPLES):
+        np.add.at(dd[:, :, j], (e, side, sensor), (r[t + 1 + j] - new) * change)
     return {'tc_dd': dd, 'tc_d2': d2, 'tc_n': n}
 
 
@@ -93,8 +88,6 @@ def lone(u: Array, ep: np.ndarray, steps: np.ndarray, knock: np.ndarray) -> np.n
     span = np.arange(-BEFORE, AFTER + 1)
     t = np.flatnonzero(u != 0)
     t = t[(t >= BEFORE) & (t + AFTER < len(u))]
-    if not t.size:
-        return t
     rows = t[:, None] + span[None, :]
     same = (ep[rows] == ep[t][:, None]).all(axis=1) & \
         (steps[rows] - steps[t][:, None] == span[None, :]).all(axis=1)
@@ -181,8 +174,7 @@ def _inferred(rec: Recording, sweeps: Sequence[Recording], config: Any, c: Array
     alone = lone(c, ep, steps, knock)
     alone = alone[~np.isfinite(h[alone + AFTER])]
     x = rec.readings[order][:, :8].astype(np.float64)
-    first = np.r_[0, np.flatnonzero(np.diff(ep)) + 1]
-    placed = h[first][np.searchsorted(first, alone, side='right') - 1]
+    placed = h[np.r_[0, np.flatnonzero(np.diff(ep)) + 1]][ep[alone]]   # episodes 0 .. m - 1
     out = []
     for i, place in zip(alone, placed):
         world = condition_world(rec, str(rec.condition[order][i]), config.world)
