@@ -26,11 +26,6 @@ LOOP = ('sensor_latency', 'actuator_turn_error')
 LOOP_PARTS = ('closed_loop', 'closed_loop_noise')
 
 
-def free(name: str) -> int:
-    """Free parameters of an effect (the parsimony rule's measure)."""
-    return REGISTRY[name].free
-
-
 def as_good(d_best: float, best_reps: Array, d_rival: float, rival_reps: Array,
             alpha: float) -> bool:
     """Does a rival explain the held-out data as well as the best: its discrepancy within
@@ -134,17 +129,12 @@ class Selection:
             trials = []
             for name in remaining:
                 cand = fit_one(name, given, c_given)
-                after = None
-                if cand.effect is not None:
-                    try:
-                        after = self.b.compare(chosen + [cand.effect])
-                    except Exception:         # noqa: BLE001 - cannot run: not fitting
-                        cand = Candidate(name, None, 'cannot run')
+                after = None if cand.effect is None else self._held_out(chosen + [cand.effect])
                 if (after is None or after.discrepancy >= d_prev) and \
                         name in LOOP and any(e.name in LOOP and e.name != name for e in chosen) \
                         and _part(current, 'closed_loop') > _part_chance(current, 'closed_loop'):
                     cand, after = self._loop_pair(chosen, name, cand, after)
-                if cand.effect is not None and after is not None:
+                if after is not None:
                     trials.append((after.discrepancy, cand, after))
             if not trials:
                 break
@@ -195,14 +185,17 @@ class Selection:
         for i, e in enumerate(out):
             if e.name in LOOP:
                 out[i] = self.refit(e, out[:i] + out[i + 1:] + [alone.effect])
-        try:
-            paired = self.b.compare(out + [alone.effect])
-        except Exception:         # noqa: BLE001 - cannot run: not fitting
-            return cand, after
-        if after is not None and after.discrepancy <= paired.discrepancy:
+        paired = self._held_out(out + [alone.effect])
+        if paired is None or (after is not None and after.discrepancy <= paired.discrepancy):
             return cand, after
         note = alone.note + ' (fitted with the loop effect refitted)'
         return Candidate(name, alone.effect, note, given=out), paired
+
+    def _held_out(self, effects: list[Effect]) -> Comparison | None:
+        try:
+            return self.b.compare(effects)
+        except Exception:         # noqa: BLE001 - cannot run: not fitting
+            return None
 
     def backfit(self, chosen: list[Effect]) -> list[Effect]:
         """Each effect chosen before the last refitted given all the others."""
@@ -305,8 +298,8 @@ def simpler(rivals: Iterable[T], than: str, name: Callable[[T], str],
             worse: Callable[[T], float]) -> list[T]:
     """The parsimony rule's order: the ``rivals`` with fewer free parameters than the effect
     ``than``, fewest first, then by ``worse``."""
-    return sorted((r for r in rivals if free(name(r)) < free(than)),
-                  key=lambda r: (free(name(r)), worse(r)))
+    return sorted((r for r in rivals if REGISTRY[name(r)].free < REGISTRY[than].free),
+                  key=lambda r: (REGISTRY[name(r)].free, worse(r)))
 
 
 def part_step(b: Target, first: Comparison, current: Comparison, after: Comparison) -> str:

@@ -254,10 +254,9 @@ class Target:
             return c
         real, own = self.counts, dropouts.counts(self.simulate(effects))
         k = dropouts.count_copies(sum(len(r) for r in self.recordings), self.copies)
-        if k == self.copies or not dropouts.undecided(real, own):
-            return recount(c, real, own)
-        more = self.simulate(effects, copies=k, remember=False)
-        return recount(c, real, dropouts.counts(more))
+        if k != self.copies and dropouts.undecided(real, own):      # a closer count
+            own = dropouts.counts(self.simulate(effects, copies=k, remember=False))
+        return recount(c, real, own)
 
     def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
                   families: frozenset[str] | None = None, margin: float = MARGIN,
