@@ -46,8 +46,7 @@ def fit_one(name: str, target: Target, c: Comparison) -> Candidate:
 
 
 def runnable(effect: Effect) -> None:
-    """Raise ValueError unless ``effect`` survives its dict form and runs a few steps with
-    finite readings."""
+    """Raise ValueError unless ``effect`` survives its dict form and a few finite steps."""
     effect = from_dict(effect.to_dict())
     channels = max([8] + [s + 1 for s in effect.sensors])
     step = effect.start(2, channels, np.random.default_rng(0))
