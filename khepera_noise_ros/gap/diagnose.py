@@ -416,7 +416,6 @@ def _late_rounding(result: Diagnosis, a: Target, b: Target, o: Options) -> tuple
                                 f'{c.discrepancy_after:.1f} -> {after.discrepancy:.1f}')
     result.notes.append(result.rounding['note'])
     c.comparison, c.discrepancy_after = after, after.discrepancy
-    c.replicates = b2.replicate_discrepancies(after)
     return a2, b2
 
 

@@ -73,7 +73,6 @@ class Compound:
     discrepancy_before: float
     discrepancy_after: float
     comparison: Comparison
-    replicates: Array
     rejected: list[dict[str, Any]] = field(default_factory=list)
 
     @property
@@ -168,8 +167,7 @@ class Selection:
                 log(f'compound: + {step.cand.name} -> {reduction(self.d_before, d_prev):.2f}')
         for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
             s['parameters'], s['sensors'] = e.parameters(), list(e.sensors)
-        return Compound(chosen, steps, self.d_before, current.discrepancy, current, current_reps,
-                        rejected)
+        return Compound(chosen, steps, self.d_before, current.discrepancy, current, rejected)
 
     def _loop_pair(self, chosen: list[Effect], name: str, cand: Candidate,
                    after: Comparison | None) -> tuple[Candidate, Comparison | None]:
