@@ -357,8 +357,7 @@ def _with(chosen: list[Effect], cand: Candidate) -> list[Effect]:
 
 
 def _part(c: Comparison, part: str) -> float:
-    keep = c.parts == part
-    return discrepancy(c.z[keep]) if keep.any() else 0.0
+    return discrepancy(c.z[c.parts == part])
 
 
 def _part_chance(c: Comparison, part: str) -> float:
