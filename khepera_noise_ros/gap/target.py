@@ -78,16 +78,15 @@ class Memory:
 
 class Target:
     def __init__(self, recordings: Sequence[Recording], config: SimConfig, seed: int = 0,
-                 base: str = 'auto', copies: int | None = None,
-                 replicates: int = bootstrap.REPLICATES, block_lengths: Sequence[int] = (),
-                 cache: SimCache | None = None):
+                 base: str = 'auto', replicates: int = bootstrap.REPLICATES,
+                 block_lengths: Sequence[int] = (), cache: SimCache | None = None):
         self.real_data = [Repaired.of(r) for r in recordings]
         self.recordings = [r.recording for r in self.real_data]
         self.config, self.seed, self.base, self.replicates = config, seed, base, replicates
         self.given: tuple[Effect, ...] = ()
-        n = sum(len(r) for r in self.recordings)
+        self.samples = sum(len(r) for r in self.recordings)
         # enough simulated samples, not more: fits cost less
-        self.copies = copies or int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
+        self.copies = int(np.clip(round(SIM_SAMPLES / max(self.samples, 1)), 2, SIM_COPIES))
         self.kinds = [r.kind for r in self.real_data]
         self.block_lengths = list(block_lengths) or [
             0 if r.kind == 'closed_loop' else stationary.block_length(
@@ -253,7 +252,7 @@ class Target:
         if not any(FAMILIES[k.family].counted for k in c.keys):
             return c
         real, own = self.counts, dropouts.counts(self.simulate(effects))
-        k = dropouts.count_copies(sum(len(r) for r in self.recordings), self.copies)
+        k = dropouts.count_copies(self.samples, self.copies)
         if k != self.copies and dropouts.undecided(real, own):      # a closer count
             own = dropouts.counts(self.simulate(effects, copies=k, remember=False))
         return recount(c, real, own)
@@ -272,8 +271,7 @@ class Target:
                    families: frozenset[str] | None, margin: float, limits: bool) -> float:
         chosen = tuple(self._chosen(kinds))
         real = _once(self.memory.real, chosen, lambda: Stats.join([self._real[i] for i in chosen]))
-        n = sum(len(r) for r in self.recordings)
-        copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
+        copies = 1 if self.samples >= SIM_SAMPLES / 2 else self.copies   # long: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
         key = (real.keys, sim.keys, families, limits)
         if key not in self.memory.pairs:        # the same for every replay of the protocol
@@ -311,7 +309,7 @@ class TargetEvidence:
         self.c = c if c is not None else Comparison([], *(np.zeros(0),) * 4)
         self.channels, self.kinds = list(target.channels), frozenset(target.kinds)
         self.given, self.observed_base = target.given, target.base == 'observed'
-        self.samples = sum(len(r) for r in target.recordings)
+        self.samples = target.samples
 
     def rows(self, family: str) -> list[Row]:
         if family not in FAMILIES:
