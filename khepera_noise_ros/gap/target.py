@@ -185,9 +185,8 @@ class Target:
             bootstrap.weights(b, replicates, np.random.default_rng(seed))))
 
     def _simulated(self, effects: Sequence[Effect], replicates: int, kinds: Sequence[str] | None,
-                   copies: int | None = None) -> tuple[Stats, Array]:
+                   copies: int) -> tuple[Stats, Array]:
         """Simulated statistics of all copies together, and each one's ``_inflation``."""
-        copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
             s = self._stats(i, sim, replicates, self.seed + 101 + i)
@@ -247,7 +246,7 @@ class Target:
     def compare(self, effects: Sequence[Effect] = (), replicates: int | None = None) -> Comparison:
         """Real against simulated with ``effects``; rare counts by the count test."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
-        sim, factor = self._simulated(effects, replicates, None)
+        sim, factor = self._simulated(effects, replicates, None, self.copies)
         c = compare(self.real, sim, factor)
         if not any(FAMILIES[k.family].counted for k in c.keys):
             return c
