@@ -74,6 +74,8 @@ class Memory:
     cuts: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)   # ``runs``
     real: dict[tuple[int, ...], Stats] = field(default_factory=dict)   # joined, by recording
     weights: Recent[tuple[Any, ...], Array] = field(default_factory=lambda: Recent(8))
+    levels: dict[tuple[int, int], tuple[tuple[Key, ...], np.ndarray, np.ndarray]] = field(
+        default_factory=dict)                     # the cell levels among a replay's keys
 
 
 class Target:
@@ -214,9 +216,13 @@ class Target:
         b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
         with np.errstate(invalid='ignore', divide='ignore'):
             ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
-        at = [j for j, k in enumerate(pooled.keys) if k.family == 'level']
-        factor[at] = np.r_[ratio, 1.0][[names.get(pooled.keys[j].condition, len(names))
-                                        for j in at]]
+        known = self.memory.levels.get((i, copies))
+        if known is None or known[0] != pooled.keys:       # the keys of most replays alike
+            at = [j for j, k in enumerate(pooled.keys) if k.family == 'level']
+            of = [names.get(pooled.keys[j].condition, len(names)) for j in at]
+            known = self.memory.levels[(i, copies)] = (pooled.keys, np.array(at, np.int64),
+                                                       np.array(of, np.int64))
+        factor[known[1]] = np.r_[ratio, 1.0][known[2]]
         return factor
 
     def _plan(self, i: int, sim: Recording, copies: int) -> tuple[Any, ...]:
