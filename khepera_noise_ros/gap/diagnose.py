@@ -164,14 +164,12 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     d_before = before.discrepancy
     before_reps = b.replicate_discrepancies(before)
 
-    def rank(b: Target) -> list[Scored]:
-        base = before if b is held_out else b.compare()
+    def rank(b: Target, base: Comparison) -> list[Scored]:
         scored = sorted((_score(b, cand, d_before, before_reps, base) for cand in candidates),
                         key=lambda s: (bool(s[0].get('closed_loop_worse')),
                                        -s[0]['heldout_reduction']))
         return _parsimonious(scored, o.alpha)
-    held_out = b
-    scored = rank(b)
+    scored = rank(b, before)
     if significant and o.rounding:
         best = scored[0][2] if scored and scored[0][1] is not None else None
         known = scored[0][1] if best is not None else None
@@ -179,7 +177,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
         if b2 is not b:
             a, b = a2, b2
             notes.append(result.rounding['note'] if result.rounding else '')
-            scored = rank(b)
+            scored = rank(b, b.compare())
     result.effects = [s[0] for s in scored]
     best_entry, best_cmp, best_effect, best_reps = scored[0] if scored else (None,) * 4
     # beside an identified world the effects refine it: the first needs the compound's share
@@ -418,7 +416,6 @@ def _late_rounding(result: Diagnosis, a: Target, b: Target, o: Options) -> tuple
                                 f'{c.discrepancy_after:.1f} -> {after.discrepancy:.1f}')
     result.notes.append(result.rounding['note'])
     c.comparison, c.discrepancy_after = after, after.discrepancy
-    c.replicates = b2.replicate_discrepancies(after)
     return a2, b2
 
 

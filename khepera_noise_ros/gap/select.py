@@ -26,11 +26,6 @@ LOOP = ('sensor_latency', 'actuator_turn_error')
 LOOP_PARTS = ('closed_loop', 'closed_loop_noise')
 
 
-def free(name: str) -> int:
-    """Free parameters of an effect (the parsimony rule's measure)."""
-    return REGISTRY[name].free
-
-
 def as_good(d_best: float, best_reps: Array, d_rival: float, rival_reps: Array,
             alpha: float) -> bool:
     """Does a rival explain the held-out data as well as the best: its discrepancy within
@@ -51,8 +46,7 @@ def fit_one(name: str, target: Target, c: Comparison) -> Candidate:
 
 
 def runnable(effect: Effect) -> None:
-    """Raise ValueError unless ``effect`` survives its dict form and runs a few steps with
-    finite readings."""
+    """Raise ValueError unless ``effect`` survives its dict form and a few finite steps."""
     effect = from_dict(effect.to_dict())
     channels = max([8] + [s + 1 for s in effect.sensors])
     step = effect.start(2, channels, np.random.default_rng(0))
@@ -79,7 +73,6 @@ class Compound:
     discrepancy_before: float
     discrepancy_after: float
     comparison: Comparison
-    replicates: Array
     rejected: list[dict[str, Any]] = field(default_factory=list)
 
     @property
@@ -134,17 +127,12 @@ class Selection:
             trials = []
             for name in remaining:
                 cand = fit_one(name, given, c_given)
-                after = None
-                if cand.effect is not None:
-                    try:
-                        after = self.b.compare(chosen + [cand.effect])
-                    except Exception:         # noqa: BLE001 - cannot run: not fitting
-                        cand = Candidate(name, None, 'cannot run')
+                after = None if cand.effect is None else self._held_out(chosen + [cand.effect])
                 if (after is None or after.discrepancy >= d_prev) and \
                         name in LOOP and any(e.name in LOOP and e.name != name for e in chosen) \
                         and _part(current, 'closed_loop') > _part_chance(current, 'closed_loop'):
                     cand, after = self._loop_pair(chosen, name, cand, after)
-                if cand.effect is not None and after is not None:
+                if after is not None:
                     trials.append((after.discrepancy, cand, after))
             if not trials:
                 break
@@ -179,8 +167,7 @@ class Selection:
                 log(f'compound: + {step.cand.name} -> {reduction(self.d_before, d_prev):.2f}')
         for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
             s['parameters'], s['sensors'] = e.parameters(), list(e.sensors)
-        return Compound(chosen, steps, self.d_before, current.discrepancy, current, current_reps,
-                        rejected)
+        return Compound(chosen, steps, self.d_before, current.discrepancy, current, rejected)
 
     def _loop_pair(self, chosen: list[Effect], name: str, cand: Candidate,
                    after: Comparison | None) -> tuple[Candidate, Comparison | None]:
@@ -195,14 +182,17 @@ class Selection:
         for i, e in enumerate(out):
             if e.name in LOOP:
                 out[i] = self.refit(e, out[:i] + out[i + 1:] + [alone.effect])
-        try:
-            paired = self.b.compare(out + [alone.effect])
-        except Exception:         # noqa: BLE001 - cannot run: not fitting
-            return cand, after
-        if after is not None and after.discrepancy <= paired.discrepancy:
+        paired = self._held_out(out + [alone.effect])
+        if paired is None or (after is not None and after.discrepancy <= paired.discrepancy):
             return cand, after
         note = alone.note + ' (fitted with the loop effect refitted)'
         return Candidate(name, alone.effect, note, given=out), paired
+
+    def _held_out(self, effects: list[Effect]) -> Comparison | None:
+        try:
+            return self.b.compare(effects)
+        except Exception:         # noqa: BLE001 - cannot run: not fitting
+            return None
 
     def backfit(self, chosen: list[Effect]) -> list[Effect]:
         """Each effect chosen before the last refitted given all the others."""
@@ -305,8 +295,8 @@ def simpler(rivals: Iterable[T], than: str, name: Callable[[T], str],
             worse: Callable[[T], float]) -> list[T]:
     """The parsimony rule's order: the ``rivals`` with fewer free parameters than the effect
     ``than``, fewest first, then by ``worse``."""
-    return sorted((r for r in rivals if free(name(r)) < free(than)),
-                  key=lambda r: (free(name(r)), worse(r)))
+    return sorted((r for r in rivals if REGISTRY[name(r)].free < REGISTRY[than].free),
+                  key=lambda r: (REGISTRY[name(r)].free, worse(r)))
 
 
 def part_step(b: Target, first: Comparison, current: Comparison, after: Comparison) -> str:
@@ -367,8 +357,7 @@ def _with(chosen: list[Effect], cand: Candidate) -> list[Effect]:
 
 
 def _part(c: Comparison, part: str) -> float:
-    keep = c.parts == part
-    return discrepancy(c.z[keep]) if keep.any() else 0.0
+    return discrepancy(c.z[c.parts == part])
 
 
 def _part_chance(c: Comparison, part: str) -> float:

@@ -6,7 +6,7 @@ import copy
 import functools
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Hashable, Sequence, TypeVar
 
 import numpy as np
 from scipy import sparse
@@ -28,6 +28,14 @@ SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compa
 SIM_SAMPLES = 20_000     # simulated samples aimed at when choosing the number of copies
 REPLAYS = 16             # replays remembered
 NULL_DRAWS, NULL_SEED = 2, 104729     # simulated stand-ins for the real data (group_null)
+K = TypeVar('K', bound=Hashable)
+V = TypeVar('V')
+
+
+def _once(memo: dict[K, V], key: K, make: Callable[[], V]) -> V:
+    if key not in memo:
+        memo[key] = make()
+    return memo[key]
 
 
 @dataclass
@@ -72,16 +80,15 @@ class Memory:
 
 class Target:
     def __init__(self, recordings: Sequence[Recording], config: SimConfig, seed: int = 0,
-                 base: str = 'auto', copies: int | None = None,
-                 replicates: int = bootstrap.REPLICATES, block_lengths: Sequence[int] = (),
-                 cache: SimCache | None = None):
+                 base: str = 'auto', replicates: int = bootstrap.REPLICATES,
+                 block_lengths: Sequence[int] = (), cache: SimCache | None = None):
         self.real_data = [Repaired.of(r) for r in recordings]
         self.recordings = [r.recording for r in self.real_data]
         self.config, self.seed, self.base, self.replicates = config, seed, base, replicates
         self.given: tuple[Effect, ...] = ()
-        n = sum(len(r) for r in self.recordings)
+        self.samples = sum(len(r) for r in self.recordings)
         # enough simulated samples, not more: fits cost less
-        self.copies = copies or int(np.clip(round(SIM_SAMPLES / max(n, 1)), 2, SIM_COPIES))
+        self.copies = int(np.clip(round(SIM_SAMPLES / max(self.samples, 1)), 2, SIM_COPIES))
         self.kinds = [r.kind for r in self.real_data]
         self.block_lengths = list(block_lengths) or [
             0 if r.kind == 'closed_loop' else stationary.block_length(
@@ -107,8 +114,7 @@ class Target:
 
     def _copy(self, **changes: Any) -> 'Target':
         out = copy.copy(self)           # the real statistics and the memory shared
-        for name, value in changes.items():
-            setattr(out, name, value)
+        vars(out).update(changes)
         return out
 
     def _chosen(self, kinds: Sequence[str] | None) -> list[int]:
@@ -131,27 +137,19 @@ class Target:
         return out
 
     def _replay(self, i: int, effects: tuple[Effect, ...], copies: int) -> Repaired:
-        sim = self._replayer(i).replay(effects, self.seed + 7919 * i, copies)
-        if (i, copies) not in self.memory.runs:       # the same for every replay
-            self.memory.runs[(i, copies)] = dropouts.Runs(episodes(sim), len(sim))
-        hit = Repaired.of(sim, self.memory.runs[(i, copies)])
+        m = self.memory
+        replayer = _once(m.replayers, (i, self.config), lambda: Replayer(
+            self.recordings[i], self.config, self.base, m.cache))
+        sim = replayer.replay(effects, self.seed + 7919 * i, copies)
+        hit = Repaired.of(sim, _once(m.runs, (i, copies),       # the same for every replay
+                                     lambda: dropouts.Runs(episodes(sim), len(sim))))
         hit.recording.readings.flags.writeable = False
         return hit
 
     def cut(self, i: int, rec: Recording) -> list[np.ndarray]:
         """``runs`` of recording ``i`` or a replay of it, made once: the same for every replay
         of as many copies (one copy: the recording's own index columns)."""
-        key = (i, len(rec) // len(self.recordings[i]))
-        if key not in self.memory.cuts:
-            self.memory.cuts[key] = runs(rec)
-        return self.memory.cuts[key]
-
-    def _replayer(self, i: int) -> Replayer:
-        key = (i, self.config)
-        if key not in self.memory.replayers:
-            self.memory.replayers[key] = Replayer(self.recordings[i], self.config, self.base,
-                                                  self.memory.cache)
-        return self.memory.replayers[key]
+        return _once(self.memory.cuts, (i, len(rec) // len(self.recordings[i])), lambda: runs(rec))
 
     def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
         rec = data.recording
@@ -162,11 +160,8 @@ class Target:
                     rec.readings[order], data.marks[order], ep, m, self.loop_only)),
                 every, self.loop_only)
         else:
-            copies = len(rec) // len(self.recordings[i])
-            key = (i, copies)
-            if key not in self.memory.layouts:
-                self.memory.layouts[key] = stationary.Layout(rec, self.block_lengths[i])
-            lay = self.memory.layouts[key]
+            lay = _once(self.memory.layouts, (i, len(rec) // len(self.recordings[i])),
+                        lambda: stationary.Layout(rec, self.block_lengths[i]))
             used = rec.channels_used
             whole = used == list(range(rec.channels)) and rec.readings.flags.c_contiguous
             x = (rec.readings if whole else rec.readings[:, used]).astype(np.float64, copy=False)
@@ -192,9 +187,8 @@ class Target:
             bootstrap.weights(b, replicates, np.random.default_rng(seed))))
 
     def _simulated(self, effects: Sequence[Effect], replicates: int, kinds: Sequence[str] | None,
-                   copies: int | None = None) -> tuple[Stats, Array]:
+                   copies: int) -> tuple[Stats, Array]:
         """Simulated statistics of all copies together, and each one's ``_inflation``."""
-        copies = self.copies if copies is None else copies
         stats, factors = [], []
         for i, sim in zip(self._chosen(kinds), self.simulate(effects, copies, kinds)):
             s = self._stats(i, sim, replicates, self.seed + 101 + i)
@@ -209,7 +203,8 @@ class Target:
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
-        by_unit, count, cells, cond, real_var, names = self._plan(i, sim, copies)
+        by_unit, count, cells, cond, real_var, names = _once(
+            self.memory.plans, (i, copies), lambda: self._plan(i, sim, copies))
         x = sim.readings if self.channels == list(range(sim.channels)) else \
             sim.readings[:, self.channels]
         means = np.asarray(by_unit @ x).reshape(len(count), copies, x.shape[1])
@@ -231,45 +226,41 @@ class Target:
         return factor
 
     def _plan(self, i: int, sim: Recording, copies: int) -> tuple[Any, ...]:
-        """What ``_inflation`` needs of the protocol alone, made once."""
-        if (i, copies) not in self.memory.plans:
-            span = int(self.recordings[i].episode.max()) + 1
-            labels, cell = stationary.cells(sim)
-            code = cell * copies + sim.episode // span
-            count = np.bincount(code, minlength=len(labels) * copies).reshape(len(labels), copies)
-            real = self._real[i]
-            names: dict[str | None, int] = {}
-            entries = []
-            for c, (condition, h) in enumerate(labels):
-                part = None if h is None else f'heading {h:g} deg'
-                for k, sensor in enumerate(self.channels):
-                    j = real.index.get(Key('level', (sensor,), condition, part))
-                    if j is not None:
-                        entries.append((c, k, names.setdefault(condition, len(names)),
-                                        real.variance[j]))
-            e = np.array(entries, np.float64).reshape(-1, 4)
-            by_unit = sparse.csr_matrix((np.ones(code.size), (code, np.arange(code.size))),
-                                        shape=(len(labels) * copies, code.size))   # sums by unit
-            self.memory.plans[(i, copies)] = (
-                by_unit, count, (e[:, 0].astype(int), e[:, 1].astype(int)), e[:, 2].astype(int),
+        """What ``_inflation`` needs of the protocol alone."""
+        span = int(self.recordings[i].episode.max()) + 1
+        labels, cell = stationary.cells(sim)
+        code = cell * copies + sim.episode // span
+        count = np.bincount(code, minlength=len(labels) * copies).reshape(len(labels), copies)
+        real = self._real[i]
+        names: dict[str | None, int] = {}
+        entries = []
+        for c, (condition, h) in enumerate(labels):
+            part = None if h is None else f'heading {h:g} deg'
+            for k, sensor in enumerate(self.channels):
+                j = real.index.get(Key('level', (sensor,), condition, part))
+                if j is not None:
+                    entries.append((c, k, names.setdefault(condition, len(names)),
+                                    real.variance[j]))
+        e = np.array(entries, np.float64).reshape(-1, 4)
+        by_unit = sparse.csr_matrix((np.ones(code.size), (code, np.arange(code.size))),
+                                    shape=(len(labels) * copies, code.size))   # sums by unit
+        return (by_unit, count, (e[:, 0].astype(int), e[:, 1].astype(int)), e[:, 2].astype(int),
                 e[:, 3], names)
-        return self.memory.plans[(i, copies)]
 
     # -- comparisons ----------------------------------------------------------------------
 
     def compare(self, effects: Sequence[Effect] = (), replicates: int | None = None) -> Comparison:
         """Real against simulated with ``effects``; rare counts by the count test."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
-        sim, factor = self._simulated(effects, replicates, None)
+        sim, factor = self._simulated(effects, replicates, None, self.copies)
         c = compare(self.real, sim, factor)
         if not any(FAMILIES[k.family].counted for k in c.keys):
             return c
         real, own = self.counts, dropouts.counts(self.simulate(effects))
-        k = dropouts.count_copies(sum(len(r) for r in self.recordings), self.copies)
-        if k == self.copies or not dropouts.undecided(real, own):
-            return recount(c, real, own)
-        more = self.simulate(effects, copies=k, remember=False)
-        return recount(c, real, dropouts.counts(more))
+        k = dropouts.count_copies(self.samples, self.copies)
+        if k != self.copies and dropouts.undecided(real, own):      # a closer count
+            own = dropouts.counts(self.simulate(effects, copies=k, remember=False))
+        return recount(c, real, own)
 
     def objective(self, effects: Sequence[Effect] = (), kinds: Sequence[str] | None = None,
                   families: frozenset[str] | None = None, margin: float = MARGIN,
@@ -278,19 +269,14 @@ class Target:
         but the limits-only ones unless ``limits``); each value computed once."""
         key = (self.seed, self.config, tuple(self.given) + tuple(effects),
                None if kinds is None else tuple(kinds), families, margin, limits)
-        memo = self.memory.objectives
-        if key not in memo:
-            memo[key] = self._objective(effects, kinds, families, margin, limits)
-        return memo[key]
+        return _once(self.memory.objectives, key,
+                     lambda: self._objective(effects, kinds, families, margin, limits))
 
     def _objective(self, effects: Sequence[Effect], kinds: Sequence[str] | None,
                    families: frozenset[str] | None, margin: float, limits: bool) -> float:
         chosen = tuple(self._chosen(kinds))
-        if chosen not in self.memory.real:
-            self.memory.real[chosen] = Stats.join([self._real[i] for i in chosen])
-        real = self.memory.real[chosen]
-        n = sum(len(r) for r in self.recordings)
-        copies = 1 if n >= SIM_SAMPLES / 2 else self.copies   # a long recording: one copy
+        real = _once(self.memory.real, chosen, lambda: Stats.join([self._real[i] for i in chosen]))
+        copies = 1 if self.samples >= SIM_SAMPLES / 2 else self.copies   # long: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
         key = (real.keys, sim.keys, families, limits)
         if key not in self.memory.pairs:        # the same for every replay of the protocol
@@ -328,7 +314,7 @@ class TargetEvidence:
         self.c = c if c is not None else Comparison([], *(np.zeros(0),) * 4)
         self.channels, self.kinds = list(target.channels), frozenset(target.kinds)
         self.given, self.observed_base = target.given, target.base == 'observed'
-        self.samples = sum(len(r) for r in target.recordings)
+        self.samples = target.samples
 
     def rows(self, family: str) -> list[Row]:
         if family not in FAMILIES:
@@ -348,7 +334,7 @@ class TargetEvidence:
         real = t.of_kind('stationary')
         if not real:
             return evidence.loop_group_evidence(self.rows, t.channels, part)
-        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        sim = self._sim()
         return evidence.part_evidence(real, sim, len(t.channels), part,
                                       (self._cuts(real), self._cuts(sim)))
 
@@ -356,30 +342,25 @@ class TargetEvidence:
         t = self.target
         if not t.of_kind('stationary'):         # the comparison's own z: standard already
             return np.zeros((0, len(t.channels), len(t.channels)))
-        key = ('null', part, t.seed, t.config, t.given)
-        if key not in t.memory.nulls:
-            sim = [r.recording for r in t.simulate(kinds=('stationary',))]
-            t.memory.nulls[key] = np.stack([evidence.part_evidence(
-                null, sim, len(t.channels), part, (self._cuts(null), self._cuts(sim)))
-                for null in ([r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1))
-                              .simulate(kinds=('stationary',), copies=1, remember=False)]
-                             for k in range(NULL_DRAWS))])
-        return t.memory.nulls[key]
+        sim = self._sim()
+        draws = ([r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
+            kinds=('stationary',), copies=1, remember=False)] for k in range(NULL_DRAWS))
+        return _once(t.memory.nulls, (part, t.seed, t.config, t.given), lambda: np.stack([
+            evidence.part_evidence(null, sim, len(t.channels), part,
+                                   (self._cuts(null), self._cuts(sim))) for null in draws]))
 
     def own_wander(self) -> dict[int, dict[str, Any]]:
         t = self.target
         real = t.of_kind('stationary')
         if not real:
             return {}
-        replays = [r.recording for r in t.simulate(kinds=('stationary',))]
+        replays = self._sim()
         sim = [evidence.Own(r, c) for r, c in zip(replays, self._cuts(replays))]
 
         def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
-            mine = []
-            for i, rec in enumerate(real):       # the real recordings' own parts once
-                if (i, shared_by) not in t.memory.own:
-                    t.memory.own[(i, shared_by)] = evidence.own_parts(rec, shared_by)
-                mine.append(t.memory.own[(i, shared_by)])
+            mine = [_once(t.memory.own, (i, shared_by),       # the real recordings' own parts
+                          functools.partial(evidence.own_parts, rec, shared_by))
+                    for i, rec in enumerate(real)]
             return mine, [own.parts(shared_by) for own in sim]
         return evidence.wandering(parts, t.channels)
 
@@ -388,7 +369,7 @@ class TargetEvidence:
         real = t.of_kind('stationary')
         if t.base == 'observed' or not real:
             return None
-        sim = [r.recording for r in t.simulate(kinds=('stationary',))]
+        sim = self._sim()
         return evidence.shared_change(real, sim, t.channels, (self._cuts(real), self._cuts(sim)))
 
     def steady_rows(self, rows: list[Row], change: dict[str, Any]) -> list[Row]:
@@ -427,10 +408,12 @@ class TargetEvidence:
 
     def stationary_runs(self, simulated: bool) -> list[Array]:
         t = self.target
-        recs = [r.recording for r in t.simulate(kinds=('stationary',))] if simulated \
-            else t.of_kind('stationary')
+        recs = self._sim() if simulated else t.of_kind('stationary')
         return [rec.readings[r][:, t.channels].astype(np.float64)
                 for rec, cut in zip(recs, self._cuts(recs)) for r in cut]
+
+    def _sim(self) -> list[Recording]:
+        return [r.recording for r in self.target.simulate(kinds=('stationary',))]
 
     def _cuts(self, recs: Sequence[Recording]) -> list[list[np.ndarray]]:
         """The runs of the stationary recordings or of their replays."""

@@ -144,4 +144,5 @@ def test_the_simpler_effect_is_as_good_within_the_tie_or_unbeaten():
     assert select.as_good(100.0, best, 100.0 * (1 + select.TIE), best + 50.0, 0.05)
     assert not select.as_good(100.0, best, 150.0, best + 50.0, 0.05)
     assert select.as_good(100.0, best, 150.0, best + rng.normal(0.0, 50.0, 200), 0.05)
-    assert select.free('correlated_noise') < select.free('intensity_dependent_noise')
+    assert select.simpler(['correlated_noise'], 'intensity_dependent_noise', str, len) \
+        == ['correlated_noise']
