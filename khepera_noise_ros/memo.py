@@ -1,11 +1,18 @@
-"""A memo of bounded size: the fast paths remember what a few simulations share without
-growing over a long diagnosis."""
+"""Memos of the fast paths: ``once`` for what a target makes once (its protocol's layout),
+``Recent`` for what a few simulations share without growing over a long diagnosis."""
 from __future__ import annotations
 
 from typing import Callable, Hashable, TypeVar
 
 K = TypeVar('K', bound=Hashable)
 V = TypeVar('V')
+
+
+def once(memo: dict[K, V], key: K, make: Callable[[], V]) -> V:
+    """``memo[key]``, made by ``make`` the first time."""
+    if key not in memo:
+        memo[key] = make()
+    return memo[key]
 
 
 class Recent(dict[K, V]):

@@ -94,6 +94,10 @@ class Comparison:
         return list(self._families.get(family, ()))
 
     @functools.cached_property
+    def index(self) -> dict[Key, int]:
+        return {k: i for i, k in enumerate(self.keys)}
+
+    @functools.cached_property
     def parts(self) -> Array:
         """Each statistic's part (``families.PARTS``)."""
         return np.array([FAMILIES[k.family].part for k in self.keys], dtype=object)

@@ -135,7 +135,9 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if not significant:
         notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
                      f'from the simulator at family-wise alpha {o.alpha} (Holm)')
-    notes += [n for n in [_noisier(c_full, o.alpha)] if n]
+    noisier = _noisier(c_full, o.alpha)
+    if noisier:
+        notes.append(noisier)
     if o.held_out:
         split.check_conditions(recordings, o.held_out)
     fit_part, test_part = split.split(list(recordings), o.held_out)
@@ -209,11 +211,10 @@ def _noisier(c: Comparison, alpha: float) -> str:
     half or more at the median, per unit of the cell's level where it has one (the model's
     noise grows with the reading; a cell at the brightest reading says nothing): every
     effect adds variation, so none can close that part of the gap."""
-    where = {k: i for i, k in enumerate(c.keys)}
     ratios = []
     for i in np.flatnonzero(c.significant(alpha)):
         k = c.keys[i]
-        j = where.get(Key('level', k.sensors, k.condition, k.part))
+        j = c.index.get(Key('level', k.sensors, k.condition, k.part))
         if k.family == 'spread' and (j is None or c.real[j] > 0 < c.sim[j]):
             level = 1.0 if j is None else c.real[j] / c.sim[j]
             ratios.append(c.sim[i] * level / max(c.real[i], 1e-9))

@@ -14,7 +14,7 @@ from .protocol import runs
 from .stationary import own_part
 
 Rows = Callable[[str], list[Row]]     # a comparison's statistics of one family
-Parts = list[tuple[AnyArray, ...]]     # own_parts of several recordings
+Parts = list[tuple[AnyArray, ...]]     # ``Own.parts`` of several recordings
 Cuts = Sequence[list[np.ndarray]]     # each recording's ``runs``, where known
 WINDOW = 8                    # samples averaged into one value of the slow part
 CORRELATIONS = ('loop_still_correlation', 'loop_residual_correlation', 'loop_change_correlation')
@@ -192,12 +192,8 @@ class Own:
         return np.where(good[:, None, :], a, np.nan), np.where(good, c, np.nan), good
 
 
-def own_parts(rec: Recording, shared_by: Sequence[int] | None = None) -> tuple[AnyArray, ...]:
-    return Own(rec).parts(shared_by)
-
-
 def own_excess(real: Parts, sim: Parts, used: list[int]) -> dict[int, dict[str, Any]]:
-    """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``own_parts``."""
+    """{sensor: {z, p, acf {lag: real - simulated}, sd}} from pooled ``Own.parts``."""
     (ar, cr, okr), (as_, cs, oks) = ([np.concatenate(c) for c in zip(*parts)]
                                      for parts in (real, sim))
     out = {}

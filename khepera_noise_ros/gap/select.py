@@ -401,7 +401,7 @@ def _family_gain(b: Target, before: Comparison, current: Comparison, after: Comp
 def _closer(current: Comparison, after: Comparison) -> bool:
     """Does the step bring the simulated statistics closer at the error bars before it: all
     of them, or those other than the ones a wander widens?"""
-    index = {k: i for i, k in enumerate(current.keys)}
+    index = current.index
     rows = [(i, index[k]) for i, k in enumerate(after.keys) if k in index]
     if not rows:
         return True

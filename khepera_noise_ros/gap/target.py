@@ -6,7 +6,7 @@ import copy
 import functools
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable, Sequence, TypeVar
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import sparse
@@ -14,7 +14,7 @@ from scipy import sparse
 from ..effects import Effect
 from ..effects.base import AnyArray, Array, Key, Row
 from ..effects.simulate import SimCache
-from ..memo import Recent
+from ..memo import Recent, once
 from ..recording import Recording
 from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turns
 from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
@@ -28,14 +28,6 @@ SIM_REPLICATES = 60      # bootstrap replicates of the simulated side in ``compa
 SIM_SAMPLES = 20_000     # simulated samples aimed at when choosing the number of copies
 REPLAYS = 16             # replays remembered
 NULL_DRAWS, NULL_SEED = 2, 104729     # simulated stand-ins for the real data (group_null)
-K = TypeVar('K', bound=Hashable)
-V = TypeVar('V')
-
-
-def _once(memo: dict[K, V], key: K, make: Callable[[], V]) -> V:
-    if key not in memo:
-        memo[key] = make()
-    return memo[key]
 
 
 @dataclass
@@ -138,18 +130,18 @@ class Target:
 
     def _replay(self, i: int, effects: tuple[Effect, ...], copies: int) -> Repaired:
         m = self.memory
-        replayer = _once(m.replayers, (i, self.config), lambda: Replayer(
+        replayer = once(m.replayers, (i, self.config), lambda: Replayer(
             self.recordings[i], self.config, self.base, m.cache))
         sim = replayer.replay(effects, self.seed + 7919 * i, copies)
-        hit = Repaired.of(sim, _once(m.runs, (i, copies),       # the same for every replay
-                                     lambda: dropouts.Runs(episodes(sim), len(sim))))
+        hit = Repaired.of(sim, once(m.runs, (i, copies),       # the same for every replay
+                                    lambda: dropouts.Runs(episodes(sim), len(sim))))
         hit.recording.readings.flags.writeable = False
         return hit
 
     def cut(self, i: int, rec: Recording) -> list[np.ndarray]:
         """``runs`` of recording ``i`` or a replay of it, made once: the same for every replay
         of as many copies (one copy: the recording's own index columns)."""
-        return _once(self.memory.cuts, (i, len(rec) // len(self.recordings[i])), lambda: runs(rec))
+        return once(self.memory.cuts, (i, len(rec) // len(self.recordings[i])), lambda: runs(rec))
 
     def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
         rec = data.recording
@@ -160,8 +152,8 @@ class Target:
                     rec.readings[order], data.marks[order], ep, m, self.loop_only)),
                 every, self.loop_only)
         else:
-            lay = _once(self.memory.layouts, (i, len(rec) // len(self.recordings[i])),
-                        lambda: stationary.Layout(rec, self.block_lengths[i]))
+            lay = once(self.memory.layouts, (i, len(rec) // len(self.recordings[i])),
+                       lambda: stationary.Layout(rec, self.block_lengths[i]))
             used = rec.channels_used
             whole = used == list(range(rec.channels)) and rec.readings.flags.c_contiguous
             x = (rec.readings if whole else rec.readings[:, used]).astype(np.float64, copy=False)
@@ -203,7 +195,7 @@ class Target:
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
-        by_unit, count, cells, cond, real_var, names = _once(
+        by_unit, count, cells, cond, real_var, names = once(
             self.memory.plans, (i, copies), lambda: self._plan(i, sim, copies))
         x = sim.readings if self.channels == list(range(sim.channels)) else \
             sim.readings[:, self.channels]
@@ -269,24 +261,17 @@ class Target:
         but the limits-only ones unless ``limits``); each value computed once."""
         key = (self.seed, self.config, tuple(self.given) + tuple(effects),
                None if kinds is None else tuple(kinds), families, margin, limits)
-        return _once(self.memory.objectives, key,
-                     lambda: self._objective(effects, kinds, families, margin, limits))
+        return once(self.memory.objectives, key,
+                    lambda: self._objective(effects, kinds, families, margin, limits))
 
     def _objective(self, effects: Sequence[Effect], kinds: Sequence[str] | None,
                    families: frozenset[str] | None, margin: float, limits: bool) -> float:
         chosen = tuple(self._chosen(kinds))
-        real = _once(self.memory.real, chosen, lambda: Stats.join([self._real[i] for i in chosen]))
+        real = once(self.memory.real, chosen, lambda: Stats.join([self._real[i] for i in chosen]))
         copies = 1 if self.samples >= SIM_SAMPLES / 2 else self.copies   # long: one copy
         sim, factor = self._simulated(effects, 0, kinds, copies)
-        key = (real.keys, sim.keys, families, limits)
-        if key not in self.memory.pairs:        # the same for every replay of the protocol
-            only = having('limits')
-            pairs = [(i, sim.index[k]) for i, k in enumerate(real.keys) if k in sim.index and (
-                k.family in families if families is not None else limits or k.family not in only)]
-            ri, si = (np.array(p, np.int64) for p in zip(*pairs)) if pairs else \
-                (np.zeros(0, np.int64),) * 2
-            self.memory.pairs[key] = ri, si, floors([real.keys[i] for i in ri])
-        ri, si, floor = self.memory.pairs[key]
+        ri, si, floor = once(self.memory.pairs, (real.keys, sim.keys, families, limits),
+                             lambda: _pairs(real, sim, families, limits))
         d = real.estimate[ri] - sim.estimate[si]
         se = np.sqrt(real.variance[ri] * factor[si] * (1.0 + 1.0 / copies) + floor)
         ok = np.isfinite(d) & np.isfinite(se)
@@ -345,7 +330,7 @@ class TargetEvidence:
         sim = self._sim()
         draws = ([r.recording for r in t.with_seed(t.seed + NULL_SEED * (k + 1)).simulate(
             kinds=('stationary',), copies=1, remember=False)] for k in range(NULL_DRAWS))
-        return _once(t.memory.nulls, (part, t.seed, t.config, t.given), lambda: np.stack([
+        return once(t.memory.nulls, (part, t.seed, t.config, t.given), lambda: np.stack([
             evidence.part_evidence(null, sim, len(t.channels), part,
                                    (self._cuts(null), self._cuts(sim))) for null in draws]))
 
@@ -358,8 +343,8 @@ class TargetEvidence:
         sim = [evidence.Own(r, c) for r, c in zip(replays, self._cuts(replays))]
 
         def parts(shared_by: tuple[int, ...]) -> tuple[evidence.Parts, evidence.Parts]:
-            mine = [_once(t.memory.own, (i, shared_by),       # the real recordings' own parts
-                          functools.partial(evidence.own_parts, rec, shared_by))
+            mine = [once(t.memory.own, (i, shared_by),       # the real recordings' own parts
+                         lambda: evidence.Own(rec).parts(shared_by))
                     for i, rec in enumerate(real)]
             return mine, [own.parts(shared_by) for own in sim]
         return evidence.wandering(parts, t.channels)
@@ -419,3 +404,15 @@ class TargetEvidence:
         """The runs of the stationary recordings or of their replays."""
         t = self.target
         return [t.cut(i, rec) for i, rec in zip(t._chosen(('stationary',)), recs)]
+
+
+def _pairs(real: Stats, sim: Stats, families: frozenset[str] | None,
+           limits: bool) -> tuple[AnyArray, AnyArray, Array]:
+    """(real, simulated) indices of the statistics an objective reads, and their floors: the
+    same for every replay of the protocol."""
+    only = having('limits')
+    pairs = [(i, sim.index[k]) for i, k in enumerate(real.keys) if k in sim.index and (
+        k.family in families if families is not None else limits or k.family not in only)]
+    ri, si = (np.array(p, np.int64) for p in zip(*pairs)) if pairs else \
+        (np.zeros(0, np.int64),) * 2
+    return ri, si, floors([real.keys[i] for i in ri])

@@ -25,7 +25,7 @@ def _wandering(rec, given, seed=7):
     sim = replayed(rec, given, seed=seed, copies=2)
 
     def parts(shared_by):
-        return [evidence.own_parts(rec, shared_by)], [evidence.own_parts(sim, shared_by)]
+        return [evidence.Own(rec).parts(shared_by)], [evidence.Own(sim).parts(shared_by)]
     return evidence.wandering(parts, rec.channels_used)
 
 
