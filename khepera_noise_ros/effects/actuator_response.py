@@ -26,6 +26,7 @@ TINY = 1e-9           # weighted squared residual per turn below which a fit gai
 
 @dataclass(frozen=True)
 class ActuatorResponse(Effect, name='actuator_response', stage=Stage.ACTUATOR, free=4,
+                       plain='actuator_turn_error',
                        summary='the turn made differs in form: dead-band, sides, size, scatter'):
     """A commanded turn of x degrees (positive to the right) turns sign(x) gain (1 +- a)
     scale(|x|) max(|x| - dead_band, 0) (1 + scatter N) + jitter N degrees (+ to the

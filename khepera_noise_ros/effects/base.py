@@ -106,12 +106,16 @@ class Effect:
     stage: ClassVar[Stage]
     free: ClassVar[int]       # free parameters beyond the location, for the parsimony rule
     summary: ClassVar[str]    # one line for the effect catalogue
+    # a world part: the unmodelled effect that is its plain case (the parsimony rule)
+    plain: ClassVar[str | None] = None
 
     def __init_subclass__(cls, name: str | None = None, stage: Stage | None = None,
-                          free: int | None = None, summary: str | None = None) -> None:
-        """An effect declares the four above as class keywords (or keeps its parent's)."""
+                          free: int | None = None, summary: str | None = None,
+                          plain: str | None = None) -> None:
+        """An effect declares those above as class keywords (or keeps its parent's)."""
         super().__init_subclass__()
-        for key, value in dict(name=name, stage=stage, free=free, summary=summary).items():
+        for key, value in dict(name=name, stage=stage, free=free, summary=summary,
+                               plain=plain).items():
             if value is not None:
                 setattr(cls, key, value)
 

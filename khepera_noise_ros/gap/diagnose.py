@@ -150,7 +150,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
     parts: dict[str, str] = {}
-    world = _world(a, b, b.compare(), o.effects, log, parts) if significant else None
+    world = _world(a, b, b.compare(), o, log, parts) if significant else None
     if world is None and parts:     # never silent about a part its protocol would identify
         notes.append('the world model is the simulator\'s own: ' + '; '.join(
             f'{name}: {note}' for name, note in parts.items()))
@@ -227,14 +227,15 @@ def _noisier(c: Comparison, alpha: float) -> str:
             'levels of --params and diagnose again')
 
 
-def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
+def _world(a: Target, b: Target, before: Comparison, o: Options,
            log: Callable[[str], None] | None, notes: dict[str, str]) -> World | None:
-    """The world model's parts among ``names`` fitted on ``a`` in order, each given those
+    """The world model's parts among ``o.effects`` fitted on ``a`` in order, each given those
     before it (the light shapes what a sensor follows, and both what a turn shows), then
-    dropped while that lowers the held-out discrepancy on ``b``; kept if the set lowers it
+    dropped while that lowers the held-out discrepancy on ``b``, or where its plain case
+    explains it as well (``as_good``: left to the effects); kept if the set lowers it
     significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
-    for part in (n for n in WORLD_MODEL if n in names):
+    for part in (n for n in WORLD_MODEL if n in o.effects):
         given = a.with_given(fitted)
         cand = fit_one(part, given, given.compare(replicates=FINGERPRINT_REPLICATES))
         notes[part] = cand.note
@@ -251,6 +252,19 @@ def _world(a: Target, b: Target, before: Comparison, names: Sequence[str],
         notes[fitted[i].name] += '; dropped: the held-out data are closer without it'
         fitted.pop(i)
         current = best
+    for effect in [e for e in fitted if e.plain in o.effects]:     # the parsimony rule
+        others = [e for e in fitted if e is not effect]
+        given = a.with_given(others)
+        plain = fit_one(str(effect.plain), given,
+                        given.compare(replicates=FINGERPRINT_REPLICATES)).effect
+        rival = b.compare(others + [plain]) if plain is not None else None
+        if rival is not None and as_good(
+                current.discrepancy, b.replicate_discrepancies(current), rival.discrepancy,
+                b.replicate_discrepancies(rival), o.alpha):
+            notes[effect.name] += (f'; left to {effect.plain}: it explains the held-out data as '
+                                   'well with fewer parameters')
+            fitted = others
+            current = b.compare(fitted)
     if not fitted:
         return None
     p = paired_p(b.replicate_discrepancies(before), b.replicate_discrepancies(current),
