@@ -106,7 +106,7 @@ class Effect:
     stage: ClassVar[Stage]
     free: ClassVar[int]       # free parameters beyond the location, for the parsimony rule
     summary: ClassVar[str]    # one line for the effect catalogue
-    # a world part: the unmodelled effect that is its plain case (the parsimony rule)
+    # a world part: the unmodelled effect with fewer parameters that is its plain case
     plain: ClassVar[str | None] = None
 
     def __init_subclass__(cls, name: str | None = None, stage: Stage | None = None,

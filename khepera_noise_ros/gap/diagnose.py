@@ -231,9 +231,9 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
            log: Callable[[str], None] | None, notes: dict[str, str]) -> World | None:
     """The world model's parts among ``o.effects`` fitted on ``a`` in order, each given those
     before it (the light shapes what a sensor follows, and both what a turn shows), then
-    dropped while that lowers the held-out discrepancy on ``b``, or where its plain case
-    explains it as well (``as_good``: left to the effects); kept if the set lowers it
-    significantly from ``before``. ``notes`` gets each part's note."""
+    dropped while that lowers the held-out discrepancy on ``b``, and left to its plain case
+    (``Effect.plain``, with fewer parameters) where that lowers it more; kept if the set
+    lowers it significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
     for part in (n for n in WORLD_MODEL if n in o.effects):
         given = a.with_given(fitted)
@@ -252,17 +252,16 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
         notes[fitted[i].name] += '; dropped: the held-out data are closer without it'
         fitted.pop(i)
         current = best
-    for effect in [e for e in fitted if e.plain in o.effects]:     # the parsimony rule
+    for effect in [e for e in fitted if e.plain in o.effects]:
         others = [e for e in fitted if e is not effect]
         given = a.with_given(others)
         plain = fit_one(str(effect.plain), given,
                         given.compare(replicates=FINGERPRINT_REPLICATES)).effect
         rival = b.compare(others + [plain]) if plain is not None else None
-        if rival is not None and as_good(
-                current.discrepancy, b.replicate_discrepancies(current), rival.discrepancy,
-                b.replicate_discrepancies(rival), o.alpha):
-            notes[effect.name] += (f'; left to {effect.plain}: it explains the held-out data as '
-                                   'well with fewer parameters')
+        if rival is not None and rival.discrepancy < current.discrepancy:
+            notes[effect.name] += (f'; left to {effect.plain}: the held-out data are closer '
+                                   f'with it ({current.discrepancy:.1f} -> '
+                                   f'{rival.discrepancy:.1f})')
             fitted = others
             current = b.compare(fitted)
     if not fitted:

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.effects import (ActuatorResponse, LightResponse, SensorResponse,
-                                       WORLD_MODEL)
+from khepera_noise_ros.effects import (NAMES, REGISTRY, ActuatorResponse, ActuatorTurnError,
+                                       LightResponse, SensorResponse, WORLD_MODEL)
+from khepera_noise_ros.effects.base import Candidate
 from khepera_noise_ros.gap import diagnose, turns
 from khepera_noise_ros.gap.protocol import kind
 from khepera_noise_ros.gap.replay import Replayer
@@ -117,6 +118,32 @@ def test_the_diagnosis_identifies_the_world_before_the_noise():
     assert not set(WORLD_MODEL) & {e['name'] for e in result.effects}
     actuator = next(e for e in result.world.effects if e.name == 'actuator_response')
     assert actuator.dead_band == pytest.approx(3.0, abs=0.6)
+
+
+def test_every_world_part_names_a_plainer_effect_as_its_plain_case():
+    for name in WORLD_MODEL:
+        plain = REGISTRY[name].plain
+        assert plain in NAMES and REGISTRY[plain].free < REGISTRY[name].free, (name, plain)
+    assert all(REGISTRY[n].plain is None for n in NAMES)
+
+
+def test_a_world_part_gives_way_to_its_plain_case_where_the_held_out_data_prefer_it(
+        monkeypatch):
+    """A robot that turns 0.6 of each command, and a turn fit that took a dead-band (as a
+    robot's other effects can lead it to): the part brings the simulator closer than the
+    stock, its plain case closer still, so the plain case is named and the world stays
+    the simulator's; a part closer than its plain case stays (the test above)."""
+    misfit = ActuatorResponse(dead_band=2.0, gain=0.7)
+    monkeypatch.setattr(ActuatorResponse, 'fit', classmethod(
+        lambda cls, evidence: Candidate(cls.name, misfit, 'a dead-band of 2 deg')))
+    truth = [ActuatorTurnError(0.6)]
+    recordings = [recorded(closed_loop(), truth, seed=3), recorded(closed_loop(), truth, seed=4)]
+    result = diagnose.diagnose(recordings, diagnose.Options(
+        config=CONFIG, replicates=40, remainder=False, rounding=False))
+    note = next(n for n in result.notes if n.startswith("the world model is the simulator's"))
+    assert result.world is None and 'left to actuator_turn_error' in note, result.notes
+    assert [e.name for e in result.named_effects] == ['actuator_turn_error']
+    assert result.named_effects[0].scale == pytest.approx(0.6, abs=0.05)
 
 
 def test_without_the_protocols_the_world_is_the_simulator_s_and_the_notes_say_which():
