@@ -106,7 +106,8 @@ class Effect:
     stage: ClassVar[Stage]
     free: ClassVar[int]       # free parameters beyond the location, for the parsimony rule
     summary: ClassVar[str]    # one line for the effect catalogue
-    # a world part: the unmodelled effect with fewer parameters that is its plain case
+    # a world part: the unmodelled effect that is the part at special values of its
+    # parameters (the same stage, fewer free parameters), which the held-out data may prefer
     plain: ClassVar[str | None] = None
 
     def __init_subclass__(cls, name: str | None = None, stage: Stage | None = None,

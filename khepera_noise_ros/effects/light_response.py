@@ -24,7 +24,6 @@ SPARSE = 12           # fewer bearings than this round the circle leave the shap
 
 @dataclass(frozen=True)
 class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
-                    plain='sensor_gain_offset',
                     summary="each sensor's light over bearing differs in shape from the model's"):
     """``levels[c][s][k]``: sensor ``sensors[s]``'s light at bearing ``bearings[k]`` in the
     condition of lamp distance ``lamps[c]`` and ambient ``ambients[c]``; the world's

@@ -25,7 +25,6 @@ WHOLE = 0.05          # a delay this near a whole step with rate 1 is sensor_lat
 
 @dataclass(frozen=True)
 class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
-                     plain='sensor_latency',
                      summary='sensors follow their light late and gradually (delay and lag)'):
     """Sensor s reads y[t] = y[t-1] + k (x[t - delay] - y[t-1]), k = ``rate_bright`` when
     the light brightens, ``rate_dark`` when it darkens, from a settled start."""

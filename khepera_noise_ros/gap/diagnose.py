@@ -232,8 +232,8 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
     """The world model's parts among ``o.effects`` fitted on ``a`` in order, each given those
     before it (the light shapes what a sensor follows, and both what a turn shows), then
     dropped while that lowers the held-out discrepancy on ``b``, and left to its plain case
-    (``Effect.plain``, with fewer parameters) where that lowers it more; kept if the set
-    lowers it significantly from ``before``. ``notes`` gets each part's note."""
+    (``Effect.plain``: nested in it) where that fitted in its place lowers it more; kept if
+    the set lowers it significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
     for part in (n for n in WORLD_MODEL if n in o.effects):
         given = a.with_given(fitted)

@@ -36,9 +36,9 @@ def section(cls: type[Effect]) -> list[str]:
              f'Stage: **{cls.stage.value}** ({STAGES[cls.stage.value]}). Free parameters '
              f'beyond the location, for the parsimony rule: {cls.free}. '
              + ('Looked for by the diagnosis.' if cls.name in NAMES else
-                'A part of the world model, identified first (docs/identification.md); it '
-                f'gives way to its plain case, `{cls.plain}`, where the held-out data are '
-                'closer with that.' if cls.name in WORLD_MODEL else
+                'A part of the world model, identified first (docs/identification.md).'
+                + (f' It gives way to its plain case, `{cls.plain}`, where the held-out data '
+                   'are closer with that.' if cls.plain else '') if cls.name in WORLD_MODEL else
                 'Not in the vocabulary: fitted to what the named effects leave.'), '']
     if len(account) > 1:
         lines += [' '.join(p.split()) for p in account[1].split('\n\n')]

@@ -120,11 +120,17 @@ def test_the_diagnosis_identifies_the_world_before_the_noise():
     assert actuator.dead_band == pytest.approx(3.0, abs=0.6)
 
 
-def test_every_world_part_names_a_plainer_effect_as_its_plain_case():
-    for name in WORLD_MODEL:
-        plain = REGISTRY[name].plain
-        assert plain in NAMES and REGISTRY[plain].free < REGISTRY[name].free, (name, plain)
+def test_a_plain_case_is_an_unmodelled_effect_nested_in_its_world_part():
+    plain = {n: REGISTRY[n].plain for n in WORLD_MODEL if REGISTRY[n].plain}
+    assert plain == {'actuator_response': 'actuator_turn_error'}
     assert all(REGISTRY[n].plain is None for n in NAMES)
+    for part, case in plain.items():
+        assert REGISTRY[case].stage is REGISTRY[part].stage
+        assert REGISTRY[case].free < REGISTRY[part].free
+    commanded = np.array([-21.0, -3.0, 0.0, 3.0, 9.0, 27.0])
+    rng = np.random.default_rng(0)
+    made = ActuatorTurnError(0.6).act(commanded.reshape(1, 1, -1), rng).ravel()
+    np.testing.assert_allclose(ActuatorResponse(gain=0.6).mean(commanded), made)
 
 
 def test_a_world_part_gives_way_to_its_plain_case_where_the_held_out_data_prefer_it(
