@@ -76,9 +76,10 @@ class Checkpoint:
             raise ValueError(f'checkpoint {self.path} is damaged: its config is not a mapping')
         differ = sorted(k for k in set(theirs) | set(self.config)
                         if theirs.get(k) != self.config.get(k))
-        if differ:
+        if differ:         # the names escaped as in JSON: one line whatever a key holds
+            names = ', '.join(json.dumps(k, ensure_ascii=False)[1:-1] for k in differ)
             raise ValueError(f'checkpoint {self.path} belongs to another run (it differs in '
-                             f'{", ".join(differ)}); set resume to false to start afresh and '
+                             f'{names}); set resume to false to start afresh and '
                              'overwrite it, or choose another checkpoint_path')
         batches = data.get('batches')
         if not isinstance(batches, list) or not all(

@@ -75,6 +75,17 @@ def test_a_run_interrupted_after_any_batch_resumes_to_the_uninterrupted_result(
             results.unlink()
 
 
+def test_another_run_s_settings_are_named_on_one_line_whatever_their_keys(tmp_path):
+    """hypothesis found it: a config key holding a line break broke the one-line error."""
+    path = tmp_path / 'run.checkpoint.json'
+    path.write_text(json.dumps({'format': FORMAT, 'config': {'\n': False, 'seed': 3},
+                                'batches': []}))
+    with pytest.raises(ValueError) as refused:
+        Checkpoint(path, {'seed': 4}).load()
+    assert '\n' not in str(refused.value)
+    assert 'it differs in \\n, seed)' in str(refused.value)
+
+
 def test_a_checkpoint_of_another_run_is_refused_unless_resume_is_off(ros_context, tmp_path):
     checkpoint = tmp_path / 'mine.json'
     with local_graph(ros_context, simulator={'steps': STEPS}, thread=False, trace=False,
