@@ -62,6 +62,9 @@ def test_too_little_data_and_impossible_hold_outs_are_refused():
         diagnose.diagnose([rec], dataclasses.replace(OPTIONS, held_out=('dusk',)))
     with pytest.raises(ValueError, match='leaves nothing to fit on'):
         split.check_conditions([rec], rec.conditions())
+    with pytest.raises(ValueError, match=r"unknown effect\(s\) \['drift'\]; the vocabulary is "
+                                         r"\[.*'temporal_drift'"):
+        diagnose.diagnose([rec], dataclasses.replace(OPTIONS, effects=('drift', 'temporal_drift')))
 
 
 def test_bad_simulator_parameters_and_effects_are_refused(tmp_path):
