@@ -1,11 +1,13 @@
 """The registry's dict and JSON forms (``effects.from_dict``, ``dumps``, ``loads``): bad
 input is refused in one line naming what is wrong; the turn error's creep is a
-parameter of its own that older effects do without."""
+parameter of its own that older effects do without; a world part's plain case is nested
+in it."""
 import numpy as np
 import pytest
 
 from khepera_noise_ros import effects as fx
-from khepera_noise_ros.effects import ActuatorTurnError
+from khepera_noise_ros.effects import (NAMES, REGISTRY, WORLD_MODEL, ActuatorResponse,
+                                       ActuatorTurnError)
 
 
 def test_a_bad_effect_is_refused_naming_the_field_or_the_name():
@@ -35,3 +37,16 @@ def test_a_creep_at_power_0_is_its_own_parameter():
     assert fx.from_dict({'name': 'actuator_turn_error', 'scale': 0.9, 'slip': 0.1}).creep == 0
     with pytest.raises(ValueError, match='creep must be a finite number >= 0'):
         fx.from_dict({'name': 'actuator_turn_error', 'creep': -1.0})
+
+
+def test_a_plain_case_is_an_unmodelled_effect_nested_in_its_world_part():
+    plain = {n: REGISTRY[n].plain for n in WORLD_MODEL if REGISTRY[n].plain}
+    assert plain == {'actuator_response': 'actuator_turn_error'}
+    assert all(REGISTRY[n].plain is None for n in NAMES)
+    for part, case in plain.items():
+        assert REGISTRY[case].stage is REGISTRY[part].stage
+        assert REGISTRY[case].free < REGISTRY[part].free
+    commanded = np.array([-21.0, -3.0, 0.0, 3.0, 9.0, 27.0])
+    rng = np.random.default_rng(0)
+    made = ActuatorTurnError(0.6).act(commanded.reshape(1, 1, -1), rng).ravel()
+    np.testing.assert_allclose(ActuatorResponse(gain=0.6).mean(commanded), made)

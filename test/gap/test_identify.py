@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from khepera_noise_ros.core.noise import NoiseModel
-from khepera_noise_ros.effects import (NAMES, REGISTRY, ActuatorResponse, ActuatorTurnError,
-                                       LightResponse, SensorResponse, WORLD_MODEL)
+from khepera_noise_ros.effects import (ActuatorResponse, ActuatorTurnError, LightResponse,
+                                       SensorResponse, WORLD_MODEL)
 from khepera_noise_ros.effects.base import Candidate
 from khepera_noise_ros.gap import diagnose, turns
 from khepera_noise_ros.gap.protocol import kind
@@ -118,19 +118,6 @@ def test_the_diagnosis_identifies_the_world_before_the_noise():
     assert not set(WORLD_MODEL) & {e['name'] for e in result.effects}
     actuator = next(e for e in result.world.effects if e.name == 'actuator_response')
     assert actuator.dead_band == pytest.approx(3.0, abs=0.6)
-
-
-def test_a_plain_case_is_an_unmodelled_effect_nested_in_its_world_part():
-    plain = {n: REGISTRY[n].plain for n in WORLD_MODEL if REGISTRY[n].plain}
-    assert plain == {'actuator_response': 'actuator_turn_error'}
-    assert all(REGISTRY[n].plain is None for n in NAMES)
-    for part, case in plain.items():
-        assert REGISTRY[case].stage is REGISTRY[part].stage
-        assert REGISTRY[case].free < REGISTRY[part].free
-    commanded = np.array([-21.0, -3.0, 0.0, 3.0, 9.0, 27.0])
-    rng = np.random.default_rng(0)
-    made = ActuatorTurnError(0.6).act(commanded.reshape(1, 1, -1), rng).ravel()
-    np.testing.assert_allclose(ActuatorResponse(gain=0.6).mean(commanded), made)
 
 
 def test_a_world_part_gives_way_to_its_plain_case_where_the_held_out_data_prefer_it(
