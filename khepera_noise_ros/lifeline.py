@@ -24,7 +24,8 @@ from types import FrameType
 PR_SET_PDEATHSIG = 1
 PARENT_ENV = 'KHEPERA_NOISE_PARENT_PID'   # the portable fallback for exec'd children
 POLL_S = 0.25
-RESEND_S = 0.02         # a SIGTERM that came inside rclpy's future callbacks, sent again
+RESEND_S = 0.02         # a SIGTERM that came where it would be dropped, sent again
+TASK = os.path.join('rclpy', 'task.py')      # rclpy's future machinery
 
 # Run by the child between fork and exec (see popen): arm the death signal, check the
 # parent is still the one that started us, then become the command.  No package import.
@@ -109,10 +110,13 @@ def popen(args: list[str], sig: int = signal.SIGKILL, **kwargs) -> subprocess.Po
     return subprocess.Popen(wrapped, env=env, **kwargs)
 
 
-def _in_future_callbacks(frame: FrameType | None) -> bool:
-    """Is ``frame`` inside rclpy's future machinery (a done callback being scheduled)?"""
+def _swallowed(frame: FrameType | None) -> bool:
+    """Would an interrupt raised at ``frame`` be printed and dropped, not stop the command:
+    inside rclpy's future machinery (logged as a failed done callback) or a finalizer
+    (``__del__``, which the garbage collector runs anywhere: "Exception ignored")?"""
     while frame is not None:
-        if frame.f_code.co_filename.endswith(os.path.join('rclpy', 'task.py')):
+        code = frame.f_code
+        if code.co_name == '__del__' or code.co_filename.endswith(TASK):
             return True
         frame = frame.f_back
     return False
@@ -123,7 +127,7 @@ def terminate_as_interrupt():
     """While inside, SIGTERM stops the main thread as Ctrl-C does (``KeyboardInterrupt``),
     so a plain ``kill`` saves what Ctrl-C saves."""
     def interrupt(signum, frame):
-        if _in_future_callbacks(frame):     # rclpy would log it as a failed callback:
+        if _swallowed(frame):
             threading.Timer(RESEND_S, os.kill, (os.getpid(), signum)).start()   # again soon
             return
         raise KeyboardInterrupt

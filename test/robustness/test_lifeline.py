@@ -150,3 +150,26 @@ def test_a_sigterm_inside_rclpy_s_future_callbacks_is_sent_again_not_raised_ther
         assert sent.wait(2.0)
         with pytest.raises(KeyboardInterrupt):
             handler(signal.SIGTERM, sys._getframe())      # anywhere else: as Ctrl-C
+
+
+def test_a_sigterm_inside_a_finalizer_is_sent_again_not_raised_there(monkeypatch):
+    """Raised inside a ``__del__`` (the garbage collector runs one anywhere, rclpy's
+    loggers have one) the interrupt would be printed as "Exception ignored" and dropped,
+    and the command would run on to its end; it is sent again a moment later instead."""
+    import threading
+    from khepera_noise_ros import lifeline
+    frames = []
+
+    class Finalized:
+        def __del__(self):
+            frames.append(sys._getframe())
+    Finalized()
+    sent = threading.Event()
+    monkeypatch.setattr(os, 'kill', lambda pid, sig: sent.set()
+                        if (pid, sig) == (os.getpid(), signal.SIGTERM) else None)
+    with lifeline.terminate_as_interrupt():
+        try:
+            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, frames[0])
+        except KeyboardInterrupt:
+            pytest.fail('raised inside the finalizer, where it would be dropped')
+        assert sent.wait(2.0)
