@@ -125,18 +125,23 @@ def _swallowed(frame: FrameType | None) -> bool:
 @contextlib.contextmanager
 def terminate_as_interrupt():
     """While inside, SIGTERM stops the main thread as Ctrl-C does (``KeyboardInterrupt``),
-    so a plain ``kill`` saves what Ctrl-C saves."""
+    so a plain ``kill`` saves what Ctrl-C saves; either, landing where the interrupt would
+    be dropped (``_swallowed``), is sent again a moment later (an ignored Ctrl-C stays so)."""
     def interrupt(signum, frame):
         if _swallowed(frame):
             threading.Timer(RESEND_S, os.kill, (os.getpid(), signum)).start()   # again soon
             return
         raise KeyboardInterrupt
+    ours = [signal.SIGTERM]
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        ours.append(signal.SIGINT)
     try:
-        previous = signal.signal(signal.SIGTERM, interrupt)
+        previous = {sig: signal.signal(sig, interrupt) for sig in ours}
     except ValueError:                  # not the main thread: leave signals alone
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

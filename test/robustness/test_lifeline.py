@@ -152,10 +152,11 @@ def test_a_sigterm_inside_rclpy_s_future_callbacks_is_sent_again_not_raised_ther
             handler(signal.SIGTERM, sys._getframe())      # anywhere else: as Ctrl-C
 
 
-def test_a_sigterm_inside_a_finalizer_is_sent_again_not_raised_there(monkeypatch):
+def test_a_stop_signal_inside_a_finalizer_is_sent_again_not_raised_there(monkeypatch):
     """Raised inside a ``__del__`` (the garbage collector runs one anywhere, rclpy's
     loggers have one) the interrupt would be printed as "Exception ignored" and dropped,
-    and the command would run on to its end; it is sent again a moment later instead."""
+    and the command would run on to its end; it is sent again a moment later instead,
+    SIGTERM and Ctrl-C alike."""
     import threading
     from khepera_noise_ros import lifeline
     frames = []
@@ -164,12 +165,30 @@ def test_a_sigterm_inside_a_finalizer_is_sent_again_not_raised_there(monkeypatch
         def __del__(self):
             frames.append(sys._getframe())
     Finalized()
-    sent = threading.Event()
-    monkeypatch.setattr(os, 'kill', lambda pid, sig: sent.set()
-                        if (pid, sig) == (os.getpid(), signal.SIGTERM) else None)
-    with lifeline.terminate_as_interrupt():
-        try:
-            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, frames[0])
-        except KeyboardInterrupt:
-            pytest.fail('raised inside the finalizer, where it would be dropped')
-        assert sent.wait(2.0)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            sent = threading.Event()
+            monkeypatch.setattr(os, 'kill', lambda pid, s, sig=sig: sent.set()
+                                if (pid, s) == (os.getpid(), sig) else None)
+            with lifeline.terminate_as_interrupt():
+                try:
+                    signal.getsignal(sig)(sig, frames[0])
+                except KeyboardInterrupt:
+                    pytest.fail(f'{sig!r} raised inside the finalizer, where it is dropped')
+                assert sent.wait(2.0), sig
+                with pytest.raises(KeyboardInterrupt):
+                    signal.getsignal(sig)(sig, sys._getframe())    # anywhere else: Ctrl-C
+            assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_an_ignored_ctrl_c_stays_ignored_inside():
+    from khepera_noise_ros import lifeline
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with lifeline.terminate_as_interrupt():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
