@@ -17,8 +17,8 @@ from . import allan, bootstrap, split
 from .compare import Comparison, entries, localise, paired_p, reduction
 from .families import having
 from .protocol import base_mode, check, kind, name, runs
-from .select import (FINGERPRINT_REPLICATES, MIN_ADDED, MIN_REDUCTION, STEP_ALPHA, Compound,
-                     Selection, as_good, fit_one, loop_worse, simpler)
+from .select import (MIN_ADDED, MIN_REDUCTION, STEP_ALPHA, Compound, Selection, as_good,
+                     fit_given, fit_one, loop_worse, simpler)
 from ..simconfig import SimConfig
 from .target import Target
 
@@ -236,8 +236,7 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
     the set lowers it significantly from ``before``. ``notes`` gets each part's note."""
     fitted: list[Effect] = []
     for part in (n for n in WORLD_MODEL if n in o.effects):
-        given = a.with_given(fitted)
-        cand = fit_one(part, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        cand = fit_given(part, a, fitted)
         notes[part] = cand.note
         if cand.effect is not None:
             fitted.append(cand.effect)
@@ -254,11 +253,11 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
         current = best
     for effect in [e for e in fitted if e.plain in o.effects]:
         others = [e for e in fitted if e is not effect]
-        given = a.with_given(others)
-        plain = fit_one(str(effect.plain), given,
-                        given.compare(replicates=FINGERPRINT_REPLICATES)).effect
-        rival = b.compare(others + [plain]) if plain is not None else None
-        if rival is not None and rival.discrepancy < current.discrepancy:
+        plain = fit_given(str(effect.plain), a, others).effect
+        if plain is None:
+            continue
+        rival = b.compare(others + [plain])
+        if rival.discrepancy < current.discrepancy:
             notes[effect.name] += (f'; left to {effect.plain}: the held-out data are closer '
                                    f'with it ({current.discrepancy:.1f} -> '
                                    f'{rival.discrepancy:.1f})')

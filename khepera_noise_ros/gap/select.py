@@ -45,6 +45,13 @@ def fit_one(name: str, target: Target, c: Comparison) -> Candidate:
         return Candidate(name, None, f'the fit failed: {type(exc).__name__}: {exc}')
 
 
+def fit_given(name: str, target: Target, given: Sequence[Effect]) -> Candidate:
+    """``fit_one`` of ``name`` on ``target`` with ``given`` always in the simulator (fitted
+    jointly with them), against the fingerprint's comparison."""
+    with_them = target.with_given(given)
+    return fit_one(name, with_them, with_them.compare(replicates=FINGERPRINT_REPLICATES))
+
+
 def runnable(effect: Effect) -> None:
     """Raise ValueError unless ``effect`` survives its dict form and a few finite steps."""
     effect = from_dict(effect.to_dict())
@@ -174,8 +181,7 @@ class Selection:
         """A latency and a turn error both move the readings' response to a turn, so the one
         chosen first takes the other's share: the candidate fitted without it and it refitted
         given the candidate, if that beats the plain fit."""
-        given = self.a.with_given([e for e in chosen if e.name not in LOOP])
-        alone = fit_one(name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        alone = fit_given(name, self.a, [e for e in chosen if e.name not in LOOP])
         if alone.effect is None:
             return cand, after
         out = list(chosen)
@@ -203,10 +209,10 @@ class Selection:
 
     def refit(self, effect: Effect, others: list[Effect]) -> Effect:
         """``effect`` refitted given ``others``, if that lowers the fitting part's objective."""
-        given = self.a.with_given(others)
-        cand = fit_one(effect.name, given, given.compare(replicates=FINGERPRINT_REPLICATES))
+        cand = fit_given(effect.name, self.a, others)
         if cand.effect is None or cand.effect == effect:
             return effect
+        given = self.a.with_given(others)
         better = given.objective([cand.effect]) < given.objective([effect])
         return cand.effect if better else effect
 

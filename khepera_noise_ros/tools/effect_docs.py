@@ -29,17 +29,25 @@ def _default(value: object) -> str:
     return json.dumps(value if not isinstance(value, tuple) else list(value))
 
 
+def _role(cls: type[Effect]) -> str:
+    """What the diagnosis does with the effect."""
+    if cls.name in NAMES:
+        return 'Looked for by the diagnosis.'
+    if cls.name not in WORLD_MODEL:
+        return 'Not in the vocabulary: fitted to what the named effects leave.'
+    out = 'A part of the world model, identified first (docs/identification.md).'
+    if cls.plain:
+        out += (f' It gives way to its plain case, `{cls.plain}`, where the held-out data are '
+                'closer with that.')
+    return out
+
+
 def section(cls: type[Effect]) -> list[str]:
     module = sys.modules[cls.__module__]
     account = inspect.cleandoc(module.__doc__ or '').split('\n\n', 1)
     lines = [f'## `{cls.name}`', '', f'*{cls.summary}.*', '',
              f'Stage: **{cls.stage.value}** ({STAGES[cls.stage.value]}). Free parameters '
-             f'beyond the location, for the parsimony rule: {cls.free}. '
-             + ('Looked for by the diagnosis.' if cls.name in NAMES else
-                'A part of the world model, identified first (docs/identification.md).'
-                + (f' It gives way to its plain case, `{cls.plain}`, where the held-out data '
-                   'are closer with that.' if cls.plain else '') if cls.name in WORLD_MODEL else
-                'Not in the vocabulary: fitted to what the named effects leave.'), '']
+             f'beyond the location, for the parsimony rule: {cls.free}. ' + _role(cls), '']
     if len(account) > 1:
         lines += [' '.join(p.split()) for p in account[1].split('\n\n')]
         lines += ['']
