@@ -135,8 +135,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
     if not significant:
         notes.append(f'the gap is not significant: no statistic of {len(c_full.keys)} differs '
                      f'from the simulator at family-wise alpha {o.alpha} (Holm)')
-    noisier = _noisier(c_full, o.alpha)
-    if noisier:
+    if noisier := _noisier(c_full, o.alpha):
         notes.append(noisier)
     if o.held_out:
         split.check_conditions(recordings, o.held_out)
@@ -261,8 +260,7 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
             notes[effect.name] += (f'; left to {effect.plain}: the held-out data are closer '
                                    f'with it ({current.discrepancy:.1f} -> '
                                    f'{rival.discrepancy:.1f})')
-            fitted = others
-            current = b.compare(fitted)
+            fitted, current = others, b.compare(others)
     if not fitted:
         return None
     p = paired_p(b.replicate_discrepancies(before), b.replicate_discrepancies(current),
@@ -320,8 +318,7 @@ def _score(b: Target, cand: Candidate, d_before: float, before_reps: Array,
                   'reduction_interval': [float(np.quantile(reps, 0.025)),
                                          float(np.quantile(reps, 0.975))],
                   'p_value': float((np.sum(reps <= 0) + 1) / (reps.size + 1))})
-    worse = loop_worse(b, [], [cand.effect], base, after)
-    if worse:
+    if worse := loop_worse(b, [], [cand.effect], base, after):
         entry['closed_loop_worse'] = worse
         entry['note'] = f'{cand.note}; predicts the held-out closed loop ({worse}) worse: not kept'
     return entry, after, cand.effect, after_reps
@@ -392,7 +389,6 @@ def _rounding(result: Diagnosis, a: Target, b: Target, given: list[Effect],
                           f'{here}, {d1:.1f} at the {other} (p = {p:.3f}): ' +
                           (f'the simulator rounds at the {other}' if better
                            else f'the {here} is kept'))
-    switched = None
     if better:
         b2 = b.with_config(with_rounding(b.config, other))
         switched = b2.compare(given)

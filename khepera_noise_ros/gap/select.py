@@ -3,7 +3,7 @@ with those chosen (the rules: docs/diagnosis.md, "The compound")."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence, TypeVar
+from typing import Any, Callable, Container, Iterable, Sequence, TypeVar
 
 import numpy as np
 
@@ -184,15 +184,12 @@ class Selection:
         alone = fit_given(name, self.a, [e for e in chosen if e.name not in LOOP])
         if alone.effect is None:
             return cand, after
-        out = list(chosen)
-        for i, e in enumerate(out):
-            if e.name in LOOP:
-                out[i] = self.refit(e, out[:i] + out[i + 1:] + [alone.effect])
-        paired = self._held_out(out + [alone.effect])
+        both = self.backfit(chosen + [alone.effect], LOOP)
+        paired = self._held_out(both)
         if paired is None or (after is not None and after.discrepancy <= paired.discrepancy):
             return cand, after
         note = alone.note + ' (fitted with the loop effect refitted)'
-        return Candidate(name, alone.effect, note, given=out), paired
+        return Candidate(name, alone.effect, note, given=both[:-1]), paired
 
     def _held_out(self, effects: list[Effect]) -> Comparison | None:
         try:
@@ -200,11 +197,13 @@ class Selection:
         except Exception:         # noqa: BLE001 - cannot run: not fitting
             return None
 
-    def backfit(self, chosen: list[Effect]) -> list[Effect]:
-        """Each effect chosen before the last refitted given all the others."""
+    def backfit(self, chosen: list[Effect], names: Container[str] | None = None) -> list[Effect]:
+        """Each effect chosen before the last (of ``names``, if given) refitted given all the
+        others."""
         out = list(chosen)
         for i in range(len(out) - 1):
-            out[i] = self.refit(out[i], out[:i] + out[i + 1:])
+            if names is None or out[i].name in names:
+                out[i] = self.refit(out[i], out[:i] + out[i + 1:])
         return out
 
     def refit(self, effect: Effect, others: list[Effect]) -> Effect:
@@ -255,8 +254,7 @@ class Selection:
         # closer; an effect adding fast noise rightly widens the spreads' error bars
         if rule and effects[-1].name == 'temporal_drift' and not _closer(current, after):
             rule = ''
-        worse = loop_worse(b, chosen, effects, current, after) if rule else ''
-        if worse:
+        if rule and (worse := loop_worse(b, chosen, effects, current, after)):
             rule, self.vetoed[effects[-1].name] = '', worse
         return rule, reps, p, added
 
@@ -315,13 +313,8 @@ def part_step(b: Target, first: Comparison, current: Comparison, after: Comparis
     f, c, a = first.split(), current.split(), after.split()
     parts = [p for p in c if p in a]
     tried = [p for p in parts if c[p].discrepancy > chance(len(c[p].keys))]
-    if not tried:
+    if not tried or worse_parts(b, current, after, parts):
         return ''
-    reps = {p: (b.replicate_discrepancies(c[p]), b.replicate_discrepancies(a[p])) for p in parts}
-    for p in parts:             # no part may move away significantly (one-sided)
-        d1, d2 = c[p].discrepancy, a[p].discrepancy
-        if d2 > d1 and paired_p(reps[p][1], reps[p][0], d2, d1) < STEP_ALPHA:
-            return ''
     best, gain = '', 0.0
     for p in tried:
         d0 = f[p].discrepancy if p in f else 0.0
@@ -329,8 +322,9 @@ def part_step(b: Target, first: Comparison, current: Comparison, after: Comparis
         if d2 >= d1:
             continue
         local, left = (d1 - d2) / d0 if d0 > 0 else 0.0, (d1 - d2) / d1
-        if (local < MIN_LOCAL and left < MIN_LEFT) or \
-                paired_p(reps[p][0], reps[p][1], d1, d2) >= STEP_ALPHA / len(tried):
+        if (local < MIN_LOCAL and left < MIN_LEFT) or paired_p(
+                b.replicate_discrepancies(c[p]), b.replicate_discrepancies(a[p]),
+                d1, d2) >= STEP_ALPHA / len(tried):
             continue
         if max(local, left) > gain:
             best, gain = p, max(local, left)
@@ -341,20 +335,23 @@ def loop_worse(b: Target, chosen: list[Effect], effects: list[Effect], current: 
                after: Comparison) -> str:
     """The part of ``LOOP_PARTS`` that ``effects`` (``after``) predict significantly worse
     than ``chosen`` (``current``) on the held-out episodes, on a second seed too; or ''."""
-    def worse(t: Target, c: Comparison, a: Comparison) -> list[str]:
-        out = []
-        for part in LOOP_PARTS:
-            cp, ap = c.part(part), a.part(part)
-            if cp.keys and ap.discrepancy > cp.discrepancy and paired_p(
-                    t.replicate_discrepancies(ap), t.replicate_discrepancies(cp),
-                    ap.discrepancy, cp.discrepancy) < STEP_ALPHA:
-                out.append(part)
-        return out
-    first = worse(b, current, after)
+    first = worse_parts(b, current, after, LOOP_PARTS)
     if not first:
         return ''
-    again = worse(*second_seed(b, chosen, effects))
+    again = worse_parts(*second_seed(b, chosen, effects), LOOP_PARTS)
     return next((p for p in first if p in again), '')
+
+
+def worse_parts(t: Target, c: Comparison, a: Comparison, parts: Iterable[str]) -> list[str]:
+    """The ``parts`` that ``a`` predicts significantly worse than ``c`` (one-sided)."""
+    out = []
+    for part in parts:
+        cp, ap = c.part(part), a.part(part)
+        if cp.keys and ap.discrepancy > cp.discrepancy and paired_p(
+                t.replicate_discrepancies(ap), t.replicate_discrepancies(cp),
+                ap.discrepancy, cp.discrepancy) < STEP_ALPHA:
+            out.append(part)
+    return out
 
 
 def _with(chosen: list[Effect], cand: Candidate) -> list[Effect]:
