@@ -141,10 +141,7 @@ class Selection:
                     cand, after = self._loop_pair(chosen, name, cand, after)
                 if after is not None:
                     trials.append((after.discrepancy, cand, after))
-            if not trials:
-                break
             trials.sort(key=lambda t: t[0])
-            step = None
             for rank, (_, cand, after) in enumerate(trials):
                 effects = _with(chosen, cand)
                 if rank < JOINT or _confounded(current, after):
@@ -161,7 +158,7 @@ class Selection:
                 rejected.append({'name': cand.name, 'added_reduction': added, 'p_value': p,
                                  'note': cand.note, 'parts': self._detail(current, after),
                                  'closed_loop_worse': self.vetoed.get(cand.name, '')})
-            if step is None:
+            else:                # no trial counts (or none could run): the selection ends
                 break
             step = self._simplest(step, trials, current, current_reps, chosen, d_prev)
             rejected = []
