@@ -68,8 +68,7 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
         ss, ns = pooled[1][cond]
         se = np.sqrt(1.0 / max(nr - 3, 1) + 1.0 / max(ns - 3, 1))
         with np.errstate(invalid='ignore'):
-            z = (np.arctanh(np.clip(_corr(sr), -0.999, 0.999)) -
-                 np.arctanh(np.clip(_corr(ss), -0.999, 0.999))) / se
+            z = (_fisher(sr) - _fisher(ss)) / se
         ok = np.isfinite(z)
         zsum += np.where(ok, z, 0.0)
         count += ok
@@ -78,9 +77,10 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
     return out
 
 
-def _corr(s: Array) -> Array:
+def _fisher(s: Array) -> Array:
+    """Fisher's z of the correlations of cross products ``s``, short of +-1."""
     d = np.sqrt(np.clip(np.diag(s), 1e-12, None))
-    out: Array = s / d[:, None] / d[None, :]
+    out: Array = np.arctanh(np.clip(s / d[:, None] / d[None, :], -0.999, 0.999))
     return out
 
 
