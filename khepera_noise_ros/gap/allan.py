@@ -76,9 +76,8 @@ def compare(real: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
     """Real against simulated profiles: per sensor and shared, the ratio of deviations at
     the shortest and longest averaging time and the long-tau slope's noise term."""
     out: dict[str, Any] = {'taus': real['taus'], 'real': real, 'simulated': sim, 'sensors': {}}
-    for key in list(real['sensors']) + ['shared']:
-        r = real['shared'] if key == 'shared' else real['sensors'][key]
-        s = sim['shared'] if key == 'shared' else sim['sensors'].get(key)
+    sides = [(key, r, sim['sensors'].get(key)) for key, r in real['sensors'].items()]
+    for key, r, s in sides + [('shared', real['shared'], sim['shared'])]:
         if s is None or not r:
             continue
         ratio = [float(a / b) if b and np.isfinite(a) and np.isfinite(b) and b > 0 else None

@@ -26,12 +26,11 @@ CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
 
 # -- groups ----------------------------------------------------------------------------
 
-def part_sums(recs: Sequence[Recording], part: str,
-              cuts: Cuts | None = None) -> dict[str, list[Any]]:
+def part_sums(recs: Sequence[Recording], part: str, cuts: Cuts) -> dict[str, list[Any]]:
     """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
     residuals, pooled over ``recs``."""
     out: dict[str, list[Any]] = {}
-    for rec, cut in zip(recs, cuts or [runs(rec) for rec in recs]):
+    for rec, cut in zip(recs, cuts):
         mine: dict[str, list[Any]] = {}
         for r in cut:
             y = rec.readings[r][:, list(rec.channels_used)].astype(np.float64)
@@ -57,7 +56,7 @@ def _add(sums: dict[Any, list[Any]], cell: Any, s: Array, n: int) -> None:
 
 
 def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
-                  part: str, cuts: tuple[Cuts | None, Cuts | None] = (None, None)) -> Array:
+                  part: str, cuts: tuple[Cuts, Cuts]) -> Array:
     """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
     conditions (0 on the diagonal)."""
     zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))

@@ -352,8 +352,8 @@ class TargetEvidence:
 
     def spread_cells(self, sensors: Sequence[int],
                      closed_loop: bool = False) -> list[tuple[float, float]]:
-        level = {(k.sensors, k.condition): v for k, v in zip(self.target.real.keys,
-                                                             self.target.real.estimate)
+        real = self.target.real
+        level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
                  if k.family == 'closed_loop_level'}
         return evidence.spread_cells(self.rows, level, sensors, closed_loop)
 
