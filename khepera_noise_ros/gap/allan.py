@@ -39,20 +39,18 @@ def taus(longest: int) -> list[int]:
     return out
 
 
-def profile(rec: Recording, factors: Sequence[int] | None = None) -> dict[str, Any]:
+def profile(rec: Recording, factors: Sequence[int]) -> dict[str, Any]:
     """{'taus': [...], 'sensors': {s: [adev per tau]}, 'shared': [adev per tau]} of the
-    recording's run residuals, pooled over runs (stationary recordings only)."""
+    recording's run residuals at averaging ``factors``, pooled over runs (stationary only)."""
     used = list(rec.channels_used)
     runs = [r for r in run_indices(rec) if r.size >= 3]
-    factors = list(factors) if factors is not None else \
-        taus(max((r.size for r in runs), default=0))
 
     def residuals(r: np.ndarray) -> Array:
         y = rec.readings[r][:, used].astype(np.float64)
         y = y - y.mean(axis=0)
         return np.concatenate([y, y.mean(axis=1, keepdims=True)], axis=1)
     adev, terms = deviation(map(residuals, runs), factors, len(used) + 1)
-    return {'taus': factors, 'terms': terms.tolist(),
+    return {'taus': list(factors), 'terms': terms.tolist(),
             'sensors': {int(s): adev[:, k].tolist() for k, s in enumerate(used)},
             'shared': adev[:, -1].tolist()}
 
@@ -78,9 +76,8 @@ def compare(real: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
     """Real against simulated profiles: per sensor and shared, the ratio of deviations at
     the shortest and longest averaging time and the long-tau slope's noise term."""
     out: dict[str, Any] = {'taus': real['taus'], 'real': real, 'simulated': sim, 'sensors': {}}
-    for key in list(real['sensors']) + ['shared']:
-        r = real['shared'] if key == 'shared' else real['sensors'][key]
-        s = sim['shared'] if key == 'shared' else sim['sensors'].get(key)
+    sides = [(key, r, sim['sensors'].get(key)) for key, r in real['sensors'].items()]
+    for key, r, s in sides + [('shared', real['shared'], sim['shared'])]:
         if s is None or not r:
             continue
         ratio = [float(a / b) if b and np.isfinite(a) and np.isfinite(b) and b > 0 else None

@@ -48,9 +48,8 @@ def pack(parts: dict[str, Array]) -> tuple[Array, dict[str, tuple[slice, tuple[i
         size = int(np.prod(value.shape[1:], dtype=int))
         layout[name] = (slice(at, at + size), tuple(value.shape[1:]))
         at += size
-    blocks = next(iter(parts.values())).shape[0] if parts else 0
-    out = np.concatenate([v.reshape(blocks, -1) for v in parts.values()], axis=1,
-                         dtype=np.float64) if parts else np.zeros((0, 0))
+    out = np.concatenate([v.reshape(len(v), -1) for v in parts.values()], axis=1,
+                         dtype=np.float64)
     return out, layout
 
 
@@ -69,8 +68,7 @@ def weights(blocks: Blocks, replicates: int, rng: np.random.Generator) -> Array:
 def resampled(blocks: Blocks, replicates: int, seed: int, w: Array | None = None) -> Array:
     """(1 + R, S, D) each stratum's sums for the full data and ``replicates`` resamples
     (``w``: the ``weights`` of ``seed``, when known)."""
-    strata = len(blocks.strata)
-    out = np.zeros((1 + replicates, strata, blocks.sums.shape[1]))
+    out = np.zeros((1 + replicates, len(blocks.strata), blocks.sums.shape[1]))
     lo, hi = blocks.edges[:-1], blocks.edges[1:]
     used = np.flatnonzero(hi > lo)
     if used.size == len(blocks.sums):           # a block per stratum: its sums

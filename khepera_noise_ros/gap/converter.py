@@ -13,6 +13,7 @@ from ..effects.base import Array, Key, Row
 from ..effects.fitting import Z_DETECT, on_grid
 from ..recording import reading_range
 from . import bootstrap
+from .closedloop import sum_by
 from .dropouts import dropouts, shares, share_keys
 
 PILE_ENDS = ('at the lowest reading', 'at the highest reading')
@@ -158,10 +159,7 @@ def _stationary_keys(ch: tuple[int, ...], conditions: tuple[str, ...], lattice: 
 def loop_sums(x: Array, marks: Array, ep: np.ndarray, episodes: int,
               values: bool) -> dict[str, Array]:
     """Per-episode sums; ``values``: the lattice too (no stationary recording beside)."""
-    def by(v: Array) -> Array:
-        out = np.zeros((episodes,) + v.shape[1:])
-        np.add.at(out, ep, v)
-        return out
+    by = functools.partial(sum_by, ep, episodes=episodes)
     out = {'dropped': by(marks[:, :8])}
     r = x[:, :8]
     if values and np.isfinite(r).all() and np.all(r == np.round(r)):

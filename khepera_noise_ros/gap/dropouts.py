@@ -47,10 +47,9 @@ def repair(x: Array, runs: Runs, moving: bool = False) -> tuple[Array, AnyArray,
         return x, marks, ends
     xt = xt.astype(np.float64, copy=False)
     # every channel's readings at its extremes, by (channel, end) and position
-    found = []
-    for g in range(2 * x.shape[1]):
-        at = runs.place[np.flatnonzero(xt[g // 2] == ends[g // 2, g % 2])]
-        found.append(np.sort(at[at >= 0]))
+    places = [runs.place[np.flatnonzero(xt[g // 2] == ends[g // 2, g % 2])]
+              for g in range(2 * x.shape[1])]
+    found = [np.sort(at[at >= 0]) for at in places]
     group = np.repeat(np.arange(len(found)), [i.size for i in found])
     at = np.concatenate(found)
     if moving:             # a value held for stretches is a limit the light reaches
@@ -171,9 +170,7 @@ def _scale(col: Array, runs: Runs, r: int) -> float:
     at = slice(runs.first[r], runs.first[r] + runs.sizes[r])
     v = col[runs.near[:, at]]
     dev = np.abs(col[runs.order[at]] - 0.5 * (v.sum(axis=0) - v.max(axis=0) - v.min(axis=0)))
-    middle = ((dev.size - 1) // 2, dev.size // 2)       # np.median's, without its overhead
-    dev = np.partition(np.where(np.isfinite(dev), dev, 0.0), middle)
-    return float(1.4826 * ((dev[middle[0]] + dev[middle[1]]) / 2))
+    return float(1.4826 * _median(np.where(np.isfinite(dev), dev, 0.0)[None])[0])
 
 
 def _adjacent(i: np.ndarray, run_of: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:

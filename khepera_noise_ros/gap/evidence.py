@@ -26,12 +26,11 @@ CHANGE_ALPHA, MIN_SENSORS, MIN_CHANGE, MIN_RUNS = 0.001, 3, 0.005, 4
 
 # -- groups ----------------------------------------------------------------------------
 
-def part_sums(recs: Sequence[Recording], part: str,
-              cuts: Cuts | None = None) -> dict[str, list[Any]]:
+def part_sums(recs: Sequence[Recording], part: str, cuts: Cuts) -> dict[str, list[Any]]:
     """{condition: [cross-product matrix, count]} of the 'fast' or 'slow' part of the run
     residuals, pooled over ``recs``."""
     out: dict[str, list[Any]] = {}
-    for rec, cut in zip(recs, cuts or [runs(rec) for rec in recs]):
+    for rec, cut in zip(recs, cuts):
         mine: dict[str, list[Any]] = {}
         for r in cut:
             y = rec.readings[r][:, list(rec.channels_used)].astype(np.float64)
@@ -57,7 +56,7 @@ def _add(sums: dict[Any, list[Any]], cell: Any, s: Array, n: int) -> None:
 
 
 def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels: int,
-                  part: str, cuts: tuple[Cuts | None, Cuts | None] = (None, None)) -> Array:
+                  part: str, cuts: tuple[Cuts, Cuts]) -> Array:
     """(C, C) z of real against simulated correlation of the ``part``, Stouffer over
     conditions (0 on the diagonal)."""
     zsum, count = np.zeros((channels, channels)), np.zeros((channels, channels))
@@ -68,8 +67,7 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
         ss, ns = pooled[1][cond]
         se = np.sqrt(1.0 / max(nr - 3, 1) + 1.0 / max(ns - 3, 1))
         with np.errstate(invalid='ignore'):
-            z = (np.arctanh(np.clip(_corr(sr), -0.999, 0.999)) -
-                 np.arctanh(np.clip(_corr(ss), -0.999, 0.999))) / se
+            z = (_fisher(sr) - _fisher(ss)) / se
         ok = np.isfinite(z)
         zsum += np.where(ok, z, 0.0)
         count += ok
@@ -78,9 +76,10 @@ def part_evidence(real: Sequence[Recording], sim: Sequence[Recording], channels:
     return out
 
 
-def _corr(s: Array) -> Array:
+def _fisher(s: Array) -> Array:
+    """Fisher's z of the correlations of cross products ``s``, short of +-1."""
     d = np.sqrt(np.clip(np.diag(s), 1e-12, None))
-    out: Array = s / d[:, None] / d[None, :]
+    out: Array = np.arctanh(np.clip(s / d[:, None] / d[None, :], -0.999, 0.999))
     return out
 
 

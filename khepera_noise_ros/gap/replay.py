@@ -31,6 +31,8 @@ class Replayer:
                  cache: SimCache | None = None):
         self.rec, self.config, self.kind = rec, config, kind(rec)
         self.mode = base_mode(rec, base)[0] if self.kind == 'stationary' else 'model'
+        self.episodes, self.column = np.unique(rec.episode, return_inverse=True)
+        self.span = int(rec.episode.max()) + 1      # copy k's episodes numbered k span on
         self.cache = cache if cache is not None else SimCache()
         self._lights: Recent[tuple[Effect, ...], tuple[Array, NoiseModel, float]] = Recent(8)
         self._copies: Recent[tuple[Any, ...], Tiled] = Recent(8)
@@ -43,17 +45,14 @@ class Replayer:
         tiled, at, index, noise, scale = self._copies.recall(
             (copies, shaped), lambda: self._tiled(copies, shaped))
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
-        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at]
-        if scale != 1.0:
-            readings = readings * scale
+        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at] * scale
         return Recording(**index, readings=readings, manifest=self._manifest())
 
     def _light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
         """(samples, channels, episodes) light of every step, the noise model, the scale,
         in the world the world-stage effects ``shaped`` make."""
-        rec, config = self.rec, self.config
-        episodes_, column = np.unique(rec.episode, return_inverse=True)
-        light = np.full((int(rec.step.max()) + 1, rec.channels, episodes_.size), np.nan)
+        rec, config, column = self.rec, self.config, self.column
+        light = np.full((int(rec.step.max()) + 1, rec.channels, self.episodes.size), np.nan)
         noise, scale = config.noise, 1.0
         if self.mode == 'model':
             rounded = config.noise.rounding == 'level'
@@ -73,11 +72,9 @@ class Replayer:
     def _tiled(self, copies: int, shaped: tuple[Effect, ...]) -> Tiled:
         """The light of ``copies`` copies side by side; per replayed sample its row of the
         light's (step, column) rows; the index columns (arrays read-only); noise model, scale."""
-        rec = self.rec
+        rec, span = self.rec, self.span
         light, noise, scale = self._lights.recall(shaped, lambda: self._light(shaped))
-        episodes_, column = np.unique(rec.episode, return_inverse=True)
         tiled = np.tile(light, (1, 1, copies))
-        span = int(rec.episode.max()) + 1
         index = {'episode': np.concatenate([rec.episode + k * span for k in range(copies)]),
                  'step': np.tile(rec.step, copies),
                  'heading_deg': np.tile(rec.heading_deg, copies),
@@ -87,7 +84,7 @@ class Replayer:
         for value in (tiled, *index.values()):
             value.flags.writeable = False
         at = np.tile(rec.step, copies) * tiled.shape[2] + np.concatenate(
-            [column + k * episodes_.size for k in range(copies)])
+            [self.column + k * self.episodes.size for k in range(copies)])
         return tiled, at, index, noise, scale
 
     def _manifest(self) -> dict[str, Any]:
@@ -101,7 +98,6 @@ class Replayer:
                                 f'the recording has {rec.channels}')
         calibration = calibrating(rec)      # the protocol's commands, no genome
         genome = None if calibration else genome_of(rec)
-        span = int(rec.episode.max()) + 1
         parts = []
         for ci, label in enumerate(rec.conditions()):
             episodes_ = np.unique(rec.episode[rec.condition == label])
@@ -113,7 +109,7 @@ class Replayer:
                                  effects)
             seeds = (np.random.SeedSequence([seed, ci]).generate_state(
                 episodes_.size * copies, np.uint64) >> np.uint64(11)).astype(np.int64)
-            ids = np.concatenate([episodes_ + k * span for k in range(copies)])
+            ids = np.concatenate([episodes_ + k * self.span for k in range(copies)])
             if genome is None:
                 parts.append(run_calibration(env, rec, episodes_, seeds, ids, label))
             else:

@@ -299,8 +299,7 @@ def _changes(rec: Recording, runs: list[np.ndarray], block_of: np.ndarray) -> tu
             out.append((b, new[:STEP_LAGS], i, j))
     if not out:
         return (np.zeros(0, np.int64),) * 4
-    at, samples, old_, new_ = zip(*out)
-    return np.array(at), np.array(samples), np.array(old_), np.array(new_)
+    return tuple(np.array(column) for column in zip(*out))
 
 
 def blocks(rec: Recording, x: Array, lay: Layout, total: Grouping,

@@ -138,11 +138,6 @@ class Target:
         hit.recording.readings.flags.writeable = False
         return hit
 
-    def cut(self, i: int, rec: Recording) -> list[np.ndarray]:
-        """``runs`` of recording ``i`` or a replay of it, made once: the same for every replay
-        of as many copies (one copy: the recording's own index columns)."""
-        return once(self.memory.cuts, (i, len(rec) // len(self.recordings[i])), lambda: runs(rec))
-
     def _stats(self, i: int, data: Repaired, replicates: int, seed: int) -> Stats:
         rec = data.recording
         if data.kind == 'closed_loop':
@@ -160,7 +155,10 @@ class Target:
             total = lay.by_block if replicates else lay.by_stratum   # no bootstrap: strata
             b = stationary.blocks(rec, x, lay, total, converter.stationary_sums(
                 x, data.marks if whole else data.marks[:, used], lay.cell, lay.order, total))
-        s = bootstrap.resampled(b, replicates, seed, self._weights(b, replicates, seed))
+        # the bootstrap weights of blocks like ``b``'s (every replay's), the last 8 kept
+        w = self.memory.weights.recall((replicates, seed, b.edges.tobytes()), lambda: (
+            bootstrap.weights(b, replicates, np.random.default_rng(seed)))) if replicates else None
+        s = bootstrap.resampled(b, replicates, seed, w)
         with np.errstate(invalid='ignore', divide='ignore'):
             if b.kind == 'closed_loop':
                 keys, cols = closedloop.stats(b, s, turns.with_stats(converter.loop_stats))
@@ -170,13 +168,6 @@ class Target:
                 keys, cols = keys + more_keys, cols + more_cols
         values = np.concatenate([c if c.ndim == 2 else c[:, None] for c in cols], axis=1)
         return Stats(tuple(keys), values)
-
-    def _weights(self, b: bootstrap.Blocks, replicates: int, seed: int) -> Array | None:
-        """The bootstrap weights of blocks like ``b``'s (every replay's), the last 8 kept."""
-        if not replicates:
-            return None
-        return self.memory.weights.recall((replicates, seed, b.edges.tobytes()), lambda: (
-            bootstrap.weights(b, replicates, np.random.default_rng(seed))))
 
     def _simulated(self, effects: Sequence[Effect], replicates: int, kinds: Sequence[str] | None,
                    copies: int) -> tuple[Stats, Array]:
@@ -202,11 +193,10 @@ class Target:
         means = np.asarray(by_unit @ x).reshape(len(count), copies, x.shape[1])
         with np.errstate(invalid='ignore', divide='ignore'):
             means /= count[..., None]
-        spread = np.var(means, axis=1, ddof=1)[cells]
-        ok = np.isfinite(spread)
-        a = np.bincount(cond[ok], spread[ok], minlength=len(names))
-        b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
-        with np.errstate(invalid='ignore', divide='ignore'):
+            spread = np.var(means, axis=1, ddof=1)[cells]
+            ok = np.isfinite(spread)
+            a = np.bincount(cond[ok], spread[ok], minlength=len(names))
+            b = np.bincount(cond[ok], real_var[ok], minlength=len(names))
             ratio = np.where(b > 0, np.clip(a / b, 1.0, 1e4), 1.0)
         known = self.memory.levels.get((i, copies))
         if known is None or known[0] != pooled.keys:       # the keys of most replays alike
@@ -362,8 +352,8 @@ class TargetEvidence:
 
     def spread_cells(self, sensors: Sequence[int],
                      closed_loop: bool = False) -> list[tuple[float, float]]:
-        level = {(k.sensors, k.condition): v for k, v in zip(self.target.real.keys,
-                                                             self.target.real.estimate)
+        real = self.target.real
+        level = {(k.sensors, k.condition): v for k, v in zip(real.keys, real.estimate)
                  if k.family == 'closed_loop_level'}
         return evidence.spread_cells(self.rows, level, sensors, closed_loop)
 
@@ -401,9 +391,11 @@ class TargetEvidence:
         return [r.recording for r in self.target.simulate(kinds=('stationary',))]
 
     def _cuts(self, recs: Sequence[Recording]) -> list[list[np.ndarray]]:
-        """The runs of the stationary recordings or of their replays."""
+        """The ``runs`` of the stationary recordings or of their replays, made once: the same
+        for every replay of as many copies (one copy: the recording's own index columns)."""
         t = self.target
-        return [t.cut(i, rec) for i, rec in zip(t._chosen(('stationary',)), recs)]
+        return [once(t.memory.cuts, (i, len(rec) // len(t.recordings[i])), lambda: runs(rec))
+                for i, rec in zip(t._chosen(('stationary',)), recs)]
 
 
 def _pairs(real: Stats, sim: Stats, families: frozenset[str] | None,
