@@ -45,7 +45,9 @@ class Replayer:
         tiled, at, index, noise, scale = self._copies.recall(
             (copies, shaped), lambda: self._tiled(copies, shaped))
         sim = stationary(tiled, noise, effects, seed=seed, cache=self.cache)
-        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at] * scale
+        readings = sim.transpose(0, 2, 1).reshape(-1, sim.shape[1])[at]
+        if scale != 1.0:              # no second copy of every replay at the model's scale
+            readings = readings * scale
         return Recording(**index, readings=readings, manifest=self._manifest())
 
     def _light(self, shaped: tuple[Effect, ...]) -> tuple[Array, NoiseModel, float]:
