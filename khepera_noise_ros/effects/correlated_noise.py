@@ -122,8 +122,7 @@ def _loop_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float |
     num = den = 0.0
     for g in groups:
         cells = evidence.spread_cells(g, closed_loop=True)
-        if cells:
-            level = np.array([v for v, _ in cells])
-            num += max(float(np.sum([e for _, e in cells])), 0.0)
-            den += float(np.sum(level * level))
+        level = np.array([v for v, _ in cells])
+        num += max(float(np.sum([e for _, e in cells])), 0.0)
+        den += float(np.sum(level * level))
     return float(np.sqrt(num / den)) if num > 0 and den > 0 else None
