@@ -102,17 +102,12 @@ def names(sensors: Sequence[int]) -> str:
     return ', '.join(f's{s}' for s in sensors)
 
 
-def tolerance(step: float, origin: float) -> float:
-    """How far from a lattice point, in steps, a reading on it may lie: none on a lattice of
-    whole numbers, ``TOL`` on one measured from readings converted from another unit."""
-    return 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
-
-
 def on_grid(x: Array, step: float, origin: float, weight: Any = None) -> float:
     """The share of readings ``x`` (``weight``: each one's count) on the lattice
-    origin + k * step, to its ``tolerance``."""
+    origin + k * step: exactly on a lattice of whole numbers, within ``TOL`` steps on one
+    measured from readings converted from another unit."""
     if not x.size:
         return 0.0
     off = (x - origin) / step
-    return float(np.average(np.abs(off - np.round(off)) <= tolerance(step, origin),
-                            weights=weight))
+    tolerance = 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
+    return float(np.average(np.abs(off - np.round(off)) <= tolerance, weights=weight))
