@@ -131,8 +131,7 @@ def _bearing(r: Row) -> float | None:
     part = str(r.key.part or '')
     if not part.startswith('heading '):
         return None
-    b = float(part.split()[1])
-    return float((b + 180.0) % 360.0 - 180.0)
+    return (float(part.split()[1]) + 180.0) % 360.0 - 180.0
 
 
 def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:
