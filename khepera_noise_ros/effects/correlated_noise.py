@@ -9,7 +9,7 @@ shared noise of a fixed size in readings (a supply, a converter) is tried as wel
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import stats as sps
@@ -50,18 +50,17 @@ class CorrelatedNoise(Effect, name='correlated_noise', stage=Stage.LIGHT, free=1
 
     @classmethod
     def fit(cls, evidence: Evidence) -> Candidate:
-        found = [tuple(evidence.channels[i] for i in g)
-                 for g in groups_of(evidence, evidence.group_evidence('fast'))]
+        found = tuple(tuple(evidence.channels[i] for i in g)
+                      for g in groups_of(evidence, evidence.group_evidence('fast')))
         if not found:
             return cls.nothing('no sensors whose noise is more correlated than simulated')
         start = _shared_strength(evidence, found)
         # closed loop only: the spreads give the start
         first = start if evidence.rows('correlation') else _loop_strength(evidence, found) or start
-        groups = tuple(found)
-        effect = refine(evidence, lambda s: cls(groups, s), first)
+        effect = refine(evidence, lambda s: cls(found, s), first)
         # shared noise of a fixed size in readings, one more form of the same effect
         level = float(np.mean([r.real for r in evidence.rows('level')] or [DARK / 2]))
-        fixed = refine(evidence, lambda s: cls(groups, 0.0, s), start * level, evaluations=5)
+        fixed = refine(evidence, lambda s: cls(found, 0.0, s), start * level, evaluations=5)
         if evidence.objective([fixed]) < evidence.objective([effect]):
             effect = fixed
         text = ' '.join('{' + names(g) + '}' for g in found)
@@ -103,7 +102,7 @@ def cluster(evidence: Array, threshold: float = THRESHOLD) -> list[list[int]]:
     return sorted((c for c in clusters if len(c) > 1), key=lambda c: c[0])
 
 
-def _shared_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float:
+def _shared_strength(evidence: Evidence, groups: Sequence[tuple[int, ...]]) -> float:
     """Shared sd as a fraction of the level: the excess covariance within the groups over
     the mean squared level (moments of the stationary statistics)."""
     level, spread = by_condition(evidence.rows('level')), by_condition(evidence.rows('spread'))
@@ -117,13 +116,12 @@ def _shared_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float
     return float(np.sqrt(max(num, 0.0) / den)) if den > 0 and num > 0 else 0.01
 
 
-def _loop_strength(evidence: Evidence, groups: list[tuple[int, ...]]) -> float | None:
+def _loop_strength(evidence: Evidence, groups: Sequence[tuple[int, ...]]) -> float | None:
     """The same from the closed loop's spreads: excess variance over squared level."""
     num = den = 0.0
     for g in groups:
         cells = evidence.spread_cells(g, closed_loop=True)
-        if cells:
-            level = np.array([v for v, _ in cells])
-            num += max(float(np.sum([e for _, e in cells])), 0.0)
-            den += float(np.sum(level * level))
+        level = np.array([v for v, _ in cells])
+        num += max(float(np.sum([e for _, e in cells])), 0.0)
+        den += float(np.sum(level * level))
     return float(np.sqrt(num / den)) if num > 0 and den > 0 else None

@@ -134,9 +134,8 @@ def _moments(runs: list[Array], edges: Array, channels: int) -> dict[str, Array]
         mean = y.mean(axis=0)
         d = np.diff(y, axis=0) / math.sqrt(2.0)
         b = np.clip(np.searchsorted(edges, mean, side='right') - 1, 0, k - 1)
-        for s in range(channels):
-            var[b[s], s] += (d[:, s] ** 2).sum()
-            cnt[b[s], s] += d.shape[0]
+        var[b, np.arange(channels)] += (np.ascontiguousarray(d.T) ** 2).sum(axis=1)
+        cnt[b, np.arange(channels)] += d.shape[0]
         cov += d.T @ d
         n_fast += d.shape[0]
         m = y.shape[0] // WINDOW

@@ -16,9 +16,9 @@ STATIONARY, CLOSED_LOOP = 'stationary', 'closed_loop'
 TOL = 0.1               # a lattice measured in readings of another unit: a tenth of a step
 
 
-def present(evidence: Evidence, kinds: tuple[str, ...] | None) -> tuple[str, ...] | None:
+def present(evidence: Evidence, kinds: tuple[str, ...]) -> tuple[str, ...] | None:
     """``kinds`` if the recordings have some of them, else None (all of them)."""
-    return kinds if kinds is None or set(kinds) & evidence.kinds else None
+    return kinds if set(kinds) & evidence.kinds else None
 
 
 def golden(f: Callable[[float], float], lo: float, hi: float, evaluations: int) -> float:
@@ -40,10 +40,10 @@ def golden(f: Callable[[float], float], lo: float, hi: float, evaluations: int) 
 
 
 def refine(evidence: Evidence, make: Callable[[float], E], start: float,
-           kinds: tuple[str, ...] | None = (STATIONARY,), evaluations: int = 7) -> E:
+           evaluations: int = 7) -> E:
     """``make(x)`` with x refined on a log scale within a factor 3 of ``start``."""
     start = float(np.clip(start, 1e-5, 1e3)) if np.isfinite(start) else 0.01
-    kinds = present(evidence, kinds)
+    kinds = present(evidence, (STATIONARY,))
     best = golden(lambda u: evidence.objective([make(math.exp(u))], kinds),
                   math.log(start / 3), math.log(start * 3), evaluations)
     return make(round(math.exp(best), 5))
@@ -102,17 +102,12 @@ def names(sensors: Sequence[int]) -> str:
     return ', '.join(f's{s}' for s in sensors)
 
 
-def tolerance(step: float, origin: float) -> float:
-    """How far from a lattice point, in steps, a reading on it may lie: none on a lattice of
-    whole numbers, ``TOL`` on one measured from readings converted from another unit."""
-    return 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
-
-
 def on_grid(x: Array, step: float, origin: float, weight: Any = None) -> float:
     """The share of readings ``x`` (``weight``: each one's count) on the lattice
-    origin + k * step, to its ``tolerance``."""
+    origin + k * step: exactly on a lattice of whole numbers, within ``TOL`` steps on one
+    measured from readings converted from another unit."""
     if not x.size:
         return 0.0
     off = (x - origin) / step
-    return float(np.average(np.abs(off - np.round(off)) <= tolerance(step, origin),
-                            weights=weight))
+    tolerance = 0.0 if float(step).is_integer() and float(origin).is_integer() else TOL
+    return float(np.average(np.abs(off - np.round(off)) <= tolerance, weights=weight))

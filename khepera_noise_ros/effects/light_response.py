@@ -62,9 +62,8 @@ class LightResponse(Effect, name='light_response', stage=Stage.WORLD, free=5,
                   np.isclose(lamp, world.lamp_distance_mm) and np.isclose(ambient, world.ambient)]
         if not listed:
             return out
-        c = listed[0]
         grid = np.arange(table.shape[1]) * (360.0 / table.shape[1])
-        levels = np.reshape(self.levels, (len(self.lamps), len(self.sensors), -1))[c]
+        levels = np.reshape(self.levels, (len(self.lamps), len(self.sensors), -1))[listed[0]]
         knots = np.asarray(self.bearings)
         at = np.rint(np.mod(knots, 360.0) * table.shape[1] / 360.0).astype(int) % table.shape[1]
         for i, s in enumerate(rows(self.sensors, table.shape[0])):
@@ -132,8 +131,7 @@ def _bearing(r: Row) -> float | None:
     part = str(r.key.part or '')
     if not part.startswith('heading '):
         return None
-    b = float(part.split()[1])
-    return float((b + 180.0) % 360.0 - 180.0)
+    return (float(part.split()[1]) + 180.0) % 360.0 - 180.0
 
 
 def _misshapen(levels: list[Row], spreads: list[Row]) -> list[int]:

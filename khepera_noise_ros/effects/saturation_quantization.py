@@ -47,8 +47,8 @@ class SaturationQuantization(
         low, high = (_strongest(found['limits'], end) for end in (0, 1))
         grid, lost, top = found['lattices'], found['dropouts'], found['top']
         if not (low or high or grid or lost):
-            return Candidate(cls.name, None,
-                             'no readings held at a limit, no coarse value grid and no dropouts')
+            return cls.nothing('no readings held at a limit, no coarse value grid and no '
+                               'dropouts')
         drop: dict[str, float] = {}
         if lost:
             values = [v for v, _ in lost.values()]

@@ -67,8 +67,6 @@ class SensorResponse(Effect, name='sensor_response', stage=Stage.LIGHT, free=3,
                                          .any(axis=1)) + 1, len(x)]
         # within a stretch of one light the lag closes a fixed share per sample
         for t0, t1 in zip(np.maximum(change[:-1], 1), change[1:]):
-            if t0 >= t1:
-                continue
             prev, target = y[t0 - 1], x[t0]
             k = np.where(target < prev, self.rate_bright, self.rate_dark)
             m = np.arange(1, t1 - t0 + 1).reshape((-1,) + (1,) * (x.ndim - 1))

@@ -106,8 +106,7 @@ class EffectEpisodes(Episodes):
                                                   self._steps[Stage.ACTUATOR])
                           if getattr(e, 'wheel_knocks', False) and getattr(e, 'knocks', False)]
         self.noise = self._noise
-        out: Array = super().reset(seed, robots, bearing_deg)
-        return out
+        return super().reset(seed, robots, bearing_deg)
 
     def step(self, direction: Any, power: Any) -> Array | None:
         if self._steps[Stage.ACTUATOR] and not self.done:
@@ -117,8 +116,7 @@ class EffectEpisodes(Episodes):
             for turn in self._steps[Stage.ACTUATOR]:
                 actual = turn(actual)
             self._bearing = (self._bearing + to_tenths(actual - commanded)) % TENTHS
-        out: Array | None = super().step(direction, power)
-        return out
+        return super().step(direction, power)
 
     def _knocked(self, tenths: np.ndarray) -> np.ndarray:
         """A knock made by the wheels of the turn effects that make knocks."""
@@ -127,8 +125,7 @@ class EffectEpisodes(Episodes):
         deg = np.asarray(tenths, np.float64) / 10.0
         for turn in self._knocking:
             deg = turn(deg)
-        out: np.ndarray = to_tenths(deg)
-        return out
+        return to_tenths(deg)
 
 
 def light_table(world: World, effects: Sequence[Effect] = (), rounded: bool = False) -> Array:
@@ -139,8 +136,7 @@ def light_table(world: World, effects: Sequence[Effect] = (), rounded: bool = Fa
     if not shaped:
         return own
     bearing = np.arange(TENTHS) / 10.0
-    raw = world.response(bearing[None, :] - np.asarray(SENSOR_ANGLES_DEG)[:, None])
-    level: Array = raw
+    level = raw = world.response(bearing[None, :] - np.asarray(SENSOR_ANGLES_DEG)[:, None])
     for e in shaped:
         level = e.table(level, world)
     changed = (level != raw).any(axis=1)       # the other sensors: exactly the world's own
@@ -162,8 +158,7 @@ class EffectNoise:
     def apply(self, base: AnyArray, sensor_draws: AnyArray, group_draws: AnyArray,
               out: AnyArray | None = None) -> AnyArray:
         if not (self.light or self.reading):
-            result: AnyArray = self.model_noise.apply(base, sensor_draws, group_draws, out=out)
-            return result
+            return self.model_noise.apply(base, sensor_draws, group_draws, out=out)
         readings = sense(np.asarray(base, np.float64), self.model_noise, sensor_draws,
                          group_draws, self.light, self.reading).astype(np.float32)
         if out is None:
@@ -185,8 +180,7 @@ def sense(base: Array, noise: NoiseModel, sensor_draws: AnyArray, group_draws: A
     out = kernel(np.asarray(level, np.float32), sensor_draws, group_draws).astype(np.float64)
     for apply in reading:
         out = apply(out)
-    result: Array = np.clip(np.rint(out), 0.0, DARK)
-    return result
+    return np.clip(np.rint(out), 0.0, DARK)
 
 
 def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), seed: int = 0,
@@ -219,8 +213,7 @@ def stationary(base: Array, noise: NoiseModel, effects: Sequence[Effect] = (), s
     for e in reading:
         out = e.over_time(out, rng)
     out = np.rint(out, out=None if reading else out)     # an array of its own: clipped in place
-    result: Array = np.clip(out, 0.0, DARK, out=out)
-    return result
+    return np.clip(out, 0.0, DARK, out=out)
 
 
 def rounds_level(noise: Any) -> bool:
@@ -237,8 +230,7 @@ def levels(level: Array, rounded: bool = True) -> AnyArray:
         np.rint(by_channel, out=out)            # rounded in double precision, then single
     else:
         out[...] = by_channel
-    flat: AnyArray = out.reshape(level.shape[1], -1)
-    return flat
+    return out.reshape(level.shape[1], -1)
 
 
 class SimCache:

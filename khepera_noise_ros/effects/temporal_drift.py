@@ -73,17 +73,17 @@ class TemporalDrift(Effect, name='temporal_drift', stage=Stage.LIGHT, free=3,
             searches.append(_search(evidence, acf, own, tuple(evidence.channels), change))
         if located and (own or not moved):
             searches.append(_search(evidence, acf, own, located, None))
-        effect, _, sensors, shared_change = min(searches, key=lambda s: s[1])
+        effect, _, shared_change = min(searches, key=lambda s: s[1])
         kind = 'one shared wander' if effect.shared else 'a wander per sensor'
         how = f'; levels move together over time (sd {change["sd"]:.1%})' \
             if shared_change and change else ''
-        return Candidate(cls.name, effect, f'slow wander on {names(sensors)} ({kind}){how}')
+        return Candidate(cls.name, effect, f'slow wander on {names(effect.sensors)} ({kind}){how}')
 
 
 def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
             sensors: tuple[int, ...],
-            change: dict[str, Any] | None) -> tuple[TemporalDrift, float, tuple[int, ...], bool]:
-    """(effect, objective, sensors, whether it is the shared change's) of one search: a
+            change: dict[str, Any] | None) -> tuple[TemporalDrift, float, bool]:
+    """(effect, objective, whether it is the shared change's) of one search: a
     change shared by all sensors from the run-to-run factors (``change``), or a wander on
     ``sensors`` bounded by their own wanders' size and time."""
     moved = change is not None
@@ -131,7 +131,7 @@ def _search(evidence: Evidence, acf: list[Row], own: dict[int, dict[str, Any]],
         value = evidence.objective([other])
         if value < best:
             effect, best = other, value
-    return effect, best, sensors, moved
+    return effect, best, moved
 
 
 def _unexplained_levels(levels: list[Row]) -> list[int]:
