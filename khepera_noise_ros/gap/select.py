@@ -243,10 +243,6 @@ class Selection:
                     _family_gain(b, first, current, after) >= MIN_LOCAL and \
                     confirmed(lambda o, pv, nw: _family_gain(o, first, pv, nw) >= MIN_LOCAL):
                 rule = 'family'
-        part = '' if rule else part_step(b, first, current, after)
-        if part:                 # a small part's share, judged on its own replicates
-            other, prev, new = second_seed(b, chosen, effects)
-            rule = f'part: {part}' if part_step(other, first, prev, new) == part else ''
         # only a slow wander widens the levels' error bars without bringing anything
         # closer; an effect adding fast noise rightly widens the spreads' error bars
         if rule and effects[-1].name == 'temporal_drift' and not _closer(current, after):
@@ -298,34 +294,6 @@ def simpler(rivals: Iterable[T], than: str, name: Callable[[T], str],
     ``than``, fewest first, then by ``worse``."""
     return sorted((r for r in rivals if REGISTRY[name(r)].free < REGISTRY[than].free),
                   key=lambda r: (REGISTRY[name(r)].free, worse(r)))
-
-
-def part_step(b: Target, first: Comparison, current: Comparison, after: Comparison) -> str:
-    """The part by which a step counts on its own paired replicates ('' for none): it is
-    significant there (alpha over the parts tried) and removes ``MIN_LOCAL`` of the part
-    before any effect or ``MIN_LEFT`` of what is left, while no other part gets
-    significantly worse and the total does not rise."""
-    if after.discrepancy >= current.discrepancy:
-        return ''
-    f, c, a = first.split(), current.split(), after.split()
-    parts = [p for p in c if p in a]
-    tried = [p for p in parts if c[p].discrepancy > chance(len(c[p].keys))]
-    if not tried or worse_parts(b, current, after, parts):
-        return ''
-    best, gain = '', 0.0
-    for p in tried:
-        d0 = f[p].discrepancy if p in f else 0.0
-        d1, d2 = c[p].discrepancy, a[p].discrepancy
-        if d2 >= d1:
-            continue
-        local, left = (d1 - d2) / d0 if d0 > 0 else 0.0, (d1 - d2) / d1
-        if (local < MIN_LOCAL and left < MIN_LEFT) or paired_p(
-                b.replicate_discrepancies(c[p]), b.replicate_discrepancies(a[p]),
-                d1, d2) >= STEP_ALPHA / len(tried):
-            continue
-        if max(local, left) > gain:
-            best, gain = p, max(local, left)
-    return best
 
 
 def loop_worse(b: Target, chosen: list[Effect], effects: list[Effect], current: Comparison,
