@@ -139,6 +139,30 @@ def test_a_world_part_gives_way_to_its_plain_case_where_the_held_out_data_prefer
     assert result.named_effects[0].scale == pytest.approx(0.6, abs=0.05)
 
 
+def test_a_world_part_the_held_out_data_are_closer_without_is_dropped(monkeypatch):
+    """A robot with the task's light shape and a dead-band but sensors as quick as
+    simulated, and a sensor fit that took a slow response (as a robot's other effects can
+    lead it to): with it the held-out data are farther than without it, so it is dropped
+    and the notes say so; the parts the robot has stay."""
+    knots = tuple(float(b) for b in np.arange(-180.0, 180.0, 10.0))
+    d = np.abs((np.array(knots) + 180.0) % 360.0 - 180.0)
+    light = LightResponse((2, 3), knots, (5.0,), (500.0,), tuple(np.round(np.r_[
+        500 - 420 * np.exp(-np.log(2) * (np.abs(d - 10) / 20) ** 2),
+        500 - 420 * np.exp(-np.log(2) * (np.abs(d + 10) / 20) ** 2)], 2)))
+    slow = SensorResponse(tuple(range(8)), 0.0, 0.2, 0.2)
+    monkeypatch.setattr(SensorResponse, 'fit', classmethod(
+        lambda cls, evidence: Candidate(cls.name, slow, 'a slow response')))
+    truth = [light, ACTUATOR]
+    recordings = [recorded(sweep(), truth, seed=1), recorded(turn_calibration(), truth, seed=2),
+                  recorded(closed_loop(), truth, seed=3)]
+    result = diagnose.diagnose(recordings, diagnose.Options(
+        config=CONFIG, replicates=60, remainder=False, rounding=False, effects=WORLD_MODEL))
+    assert result.world is not None, result.notes
+    assert [e.name for e in result.world.effects] == ['light_response', 'actuator_response']
+    assert 'dropped: the held-out data are closer without it' in \
+        result.world.notes['sensor_response'], result.world.notes
+
+
 def test_without_the_protocols_the_world_is_the_simulator_s_and_the_notes_say_which():
     """Section 2's kind of recording (a few headings, no turns) of a robot with a
     misshapen light response: no part is identified, and the notes name the protocols
