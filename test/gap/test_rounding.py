@@ -6,6 +6,7 @@ which values the readings take (the value lattice); the diagnosis chooses it fro
 the data and must keep the paper's setting on recordings made with it (controls).
 """
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -17,7 +18,9 @@ from khepera_noise_ros.effects import CorrelatedNoise, SensorGainOffset, SensorL
 from khepera_noise_ros.effects.simulate import EffectEpisodes, stationary
 from khepera_noise_ros import simconfig
 from khepera_noise_ros.experiment import diagnosis_report as report
-from khepera_noise_ros.gap import diagnose
+from khepera_noise_ros.effects.base import Key
+from khepera_noise_ros.gap import diagnose, select
+from khepera_noise_ros.gap.compare import Comparison
 from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.gap.target import Target
 from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
@@ -167,3 +170,72 @@ def test_the_diagnosis_rounds_the_reading_when_the_robot_does_and_writes_it(tmp_
                                           seed=5)], options)
     assert control.rounding['rounding'] == 'level', control.rounding
     assert control.top_effect == 'correlated_noise'
+
+
+# -- the rounding asked again given the whole compound ----------------------------------
+
+LATTICE = [Key('granularity', (s,), 'c', 'mod 2') for s in range(4)]
+LEVELS = [Key('level', (s,), f'c{j}', None) for s in range(4) for j in range(10)]
+KEYS = LATTICE + LEVELS
+
+
+class Rounded:
+    """What the rounding choice asks of a ``Target``: comparisons whose simulated side
+    depends only on where its config rounds (``z``: rounding -> (lattice z, level z)),
+    real bootstrap replicates, and a copy with another config."""
+
+    def __init__(self, z, config=CONFIG, seed=0):
+        rng = np.random.default_rng(seed)
+        self.z, self.config = z, config
+        self.real = rng.normal(100.0, 5.0, len(KEYS))
+        self.reps = self.real + rng.normal(0.0, 1.0, (200, len(KEYS)))
+
+    def compare(self, effects=(), replicates=None):
+        lattice, level = self.z[self.config.noise.rounding]
+        sim = self.real - np.r_[np.full(len(LATTICE), lattice), np.full(len(LEVELS), level)]
+        return Comparison(list(KEYS), self.real, sim, np.ones(len(KEYS)), self.real - sim)
+
+    def replicate_discrepancies(self, c):
+        z = (self.reps[:, [KEYS.index(k) for k in c.keys]] - c.sim[None]) / c.se[None]
+        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+
+    def with_config(self, config):
+        out = Rounded(self.z, config)
+        out.real, out.reps = self.real, self.reps
+        return out
+
+
+def _late(held_out_level_z):
+    """A compound of two effects chosen with the paper's rounding kept at the first ask;
+    asked again, rounding the reading leaves the lattice statistics at z 0 (z 6 at the
+    level) on both parts, and the held-out levels at ``held_out_level_z`` (3 at the
+    level)."""
+    a = Rounded({'level': (6.0, 0.0), 'reading': (0.0, 0.0)})
+    b = Rounded({'level': (6.0, 3.0), 'reading': (0.0, held_out_level_z)}, seed=1)
+    effects = [SensorGainOffset((0,), (1.1,), (2.0,)), SensorLatency((1,), 1)]
+    c = b.compare(effects)
+    compound = select.Compound(effects, [], 1e4, c.discrepancy, c)
+    result = types.SimpleNamespace(compound=compound, notes=[], rounding={
+        'rounding': 'level', 'given': 'level', 'lattice': {'level': 1.0, 'reading': 1.0},
+        'p_value': 0.5, 'note': 'the level is kept'})
+    a2, b2 = diagnose._late_rounding(result, a, b, diagnose.Options())
+    return result, compound, (a, b), (a2, b2)
+
+
+def test_the_rounding_asked_again_given_the_compound_switches_where_it_brings_it_closer():
+    result, compound, before, after = _late(3.0)
+    assert result.rounding['early']['rounding'] == 'level'
+    assert result.rounding['rounding'] == 'reading', result.rounding['note']
+    assert [t.config.noise.rounding for t in after] == ['reading', 'reading']
+    assert compound.discrepancy_after < before[1].compare().discrepancy
+    assert compound.comparison.discrepancy == compound.discrepancy_after
+    assert result.notes == [result.rounding['note']]
+
+
+def test_the_rounding_asked_again_is_not_kept_where_the_compound_does_no_better():
+    """The lattice prefers the reading, but the held-out levels move away (z 3 -> 5)."""
+    result, compound, before, after = _late(5.0)
+    assert result.rounding['rounding'] == 'level'
+    assert 'does not fall' in result.rounding['note'], result.rounding['note']
+    assert after == before and result.notes == []
+    assert compound.discrepancy_after == before[1].compare().discrepancy
