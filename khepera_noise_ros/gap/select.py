@@ -300,17 +300,17 @@ def loop_worse(b: Target, chosen: list[Effect], effects: list[Effect], current: 
                after: Comparison) -> str:
     """The part of ``LOOP_PARTS`` that ``effects`` (``after``) predict significantly worse
     than ``chosen`` (``current``) on the held-out episodes, on a second seed too; or ''."""
-    first = worse_parts(b, current, after, LOOP_PARTS)
+    first = _worse(b, current, after)
     if not first:
         return ''
-    again = worse_parts(*second_seed(b, chosen, effects), LOOP_PARTS)
+    again = _worse(*second_seed(b, chosen, effects))
     return next((p for p in first if p in again), '')
 
 
-def worse_parts(t: Target, c: Comparison, a: Comparison, parts: Iterable[str]) -> list[str]:
-    """The ``parts`` that ``a`` predicts significantly worse than ``c`` (one-sided)."""
+def _worse(t: Target, c: Comparison, a: Comparison) -> list[str]:
+    """The ``LOOP_PARTS`` that ``a`` predicts significantly worse than ``c`` (one-sided)."""
     out = []
-    for part in parts:
+    for part in LOOP_PARTS:
         cp, ap = c.part(part), a.part(part)
         if cp.keys and ap.discrepancy > cp.discrepancy and paired_p(
                 t.replicate_discrepancies(ap), t.replicate_discrepancies(cp),

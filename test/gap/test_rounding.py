@@ -5,6 +5,7 @@ converter rounds the noisy analogue signal once ('reading').  The setting change
 which values the readings take (the value lattice); the diagnosis chooses it from
 the data and must keep the paper's setting on recordings made with it (controls).
 """
+import copy
 import dataclasses
 import types
 
@@ -184,9 +185,9 @@ class Rounded:
     depends only on where its config rounds (``z``: rounding -> (lattice z, level z)),
     real bootstrap replicates, and a copy with another config."""
 
-    def __init__(self, z, config=CONFIG, seed=0):
+    def __init__(self, z, seed=0):
         rng = np.random.default_rng(seed)
-        self.z, self.config = z, config
+        self.z, self.config = z, CONFIG
         self.real = rng.normal(100.0, 5.0, len(KEYS))
         self.reps = self.real + rng.normal(0.0, 1.0, (200, len(KEYS)))
 
@@ -200,8 +201,8 @@ class Rounded:
         return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
 
     def with_config(self, config):
-        out = Rounded(self.z, config)
-        out.real, out.reps = self.real, self.reps
+        out = copy.copy(self)
+        out.config = config
         return out
 
 
