@@ -1,6 +1,6 @@
 """How long the gap diagnosis takes (prints figures; not a test).
 
-    python benchmark/bench_diagnose.py [--repeat 1] [--skip-long] [--robot v1|default]
+    python benchmark/bench_diagnose.py [--repeat 1] [--skip-long] [--robot v1|default] [--profile]
 
 Two recordings from the emulated robot with its effects (``--robot v1``, the default
 here: ``EffectsConfig.real_robot_v1()``, the robot the speed targets were set on;
@@ -12,12 +12,16 @@ Each is diagnosed in this process on one core (OMP/BLAS threads set to 1); the
 wall and CPU time of ``gap.diagnose.diagnose`` are printed, and the compound set
 found.  On a machine shared with other jobs the wall figures are pessimistic; the
 CPU time of this single-threaded process is the closer measure of one core's work.
+``--profile``: one more run of each under cProfile (slower), with where its time goes:
+the fitters' objectives, the comparisons, and within them the replays and statistics.
 """
 from __future__ import annotations
 
 import argparse
+import cProfile
 import math
 import os
+import pstats
 import sys
 import time
 from pathlib import Path
@@ -56,11 +60,33 @@ def timed(rec, seed: int = 0, which: str = 'v1') -> tuple[float, diagnose.Diagno
     return time.perf_counter() - t0, result
 
 
+# where a diagnosis spends its time: (label, function of ``gap/target.py``)
+WHERE = (('the fitters\' objectives', '_objective'), ('comparisons', 'compare'),
+         ('  replays, dropouts repaired', '_replay'), ('  statistics', '_stats'))
+
+
+def profile(rec, which: str) -> None:
+    """Print the cumulative CPU of ``WHERE`` and the functions with most time of their own."""
+    profiler = cProfile.Profile(time.process_time)
+    profiler.runcall(timed, rec, 0, which)
+    table = pstats.Stats(profiler).stats
+    print('  under cProfile (slower):')
+    for label, name in WHERE:
+        rows = [v for (path, _, func), v in table.items()
+                if path.endswith(os.path.join('gap', 'target.py')) and func == name]
+        print(f'    {label:30s} {sum(v[1] for v in rows):5d} calls '
+              f'{sum(v[3] for v in rows):6.2f} s')
+    own = sorted(table.items(), key=lambda kv: -kv[1][2])[:8]
+    for (path, line, func), v in own:
+        print(f'    own time {v[2]:5.2f} s  {func} ({Path(path).name}:{line})')
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('--repeat', type=int, default=1)
     p.add_argument('--skip-long', action='store_true')
     p.add_argument('--robot', choices=sorted(ROBOTS), default='v1')
+    p.add_argument('--profile', action='store_true', help='where the time goes, by cProfile')
     args = p.parse_args(argv)
     headings = sum(len(h) for h in STATIONARY.values())
     cases = [('default', SAMPLES)]
@@ -83,6 +109,8 @@ def main(argv=None) -> int:
               f'top {result.top_effect}; '
               f'compound {chosen} shrink '
               f'{"n/a" if shrink is None else f"{shrink:.2f}"}', flush=True)
+        if args.profile:
+            profile(rec, args.robot)
     return 0
 
 
