@@ -24,6 +24,7 @@ from khepera_noise_ros.gap import diagnose, select
 from khepera_noise_ros.gap.compare import Comparison
 from khepera_noise_ros.simconfig import SimConfig
 from khepera_noise_ros.gap.target import Target
+from khepera_noise_ros.testing.comparisons import replicate_discrepancies
 from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
 
 READING = diagnose.with_rounding(CONFIG, 'reading')
@@ -197,8 +198,7 @@ class Rounded:
         return Comparison(list(KEYS), self.real, sim, np.ones(len(KEYS)), self.real - sim)
 
     def replicate_discrepancies(self, c):
-        z = (self.reps[:, [KEYS.index(k) for k in c.keys]] - c.sim[None]) / c.se[None]
-        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+        return replicate_discrepancies(KEYS, self.reps, c)
 
     def with_config(self, config):
         out = copy.copy(self)

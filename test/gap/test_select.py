@@ -12,6 +12,7 @@ from khepera_noise_ros.effects.base import Candidate, Key
 from khepera_noise_ros.gap import select
 from khepera_noise_ros.gap.compare import Comparison
 from khepera_noise_ros.gap.target import Target
+from khepera_noise_ros.testing.comparisons import replicate_discrepancies
 from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_protocol
 
 STATIONARY = [Key('level', (i % 8,), f'c{i}', None) for i in range(40)]
@@ -42,9 +43,7 @@ class FakeTarget:
         return Comparison(list(KEYS), self.real, sim, SE, (self.real - sim) / SE)
 
     def replicate_discrepancies(self, c):
-        index = [KEYS.index(k) for k in c.keys]
-        z = (self.reps[:, index] - c.sim[None]) / c.se[None]
-        return (np.clip(np.abs(z) - 2.0, 0.0, None) ** 2).sum(axis=1)
+        return replicate_discrepancies(KEYS, self.reps, c)
 
     def with_seed(self, seed):
         return FakeTarget(self.real, self.reps, self.sims, seed)
