@@ -61,7 +61,7 @@ def timed(rec, seed: int = 0, which: str = 'v1') -> tuple[float, diagnose.Diagno
 
 
 # where a diagnosis spends its time: (label, function of ``gap/target.py``)
-WHERE = (('the fitters\' objectives', '_objective'), ('comparisons', 'compare'),
+WHERE = (('the fitters\' objectives', '_objective'), ('comparisons', '_compare'),
          ('  replays, dropouts repaired', '_replay'), ('  statistics', '_stats'))
 
 

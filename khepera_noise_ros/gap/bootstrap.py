@@ -45,7 +45,7 @@ def pack(parts: dict[str, Array]) -> tuple[Array, dict[str, tuple[slice, tuple[i
     """(B, D) doubles of the named (B, ...) parts side by side, and where each lies."""
     layout, at = {}, 0
     for name, value in parts.items():
-        size = int(np.prod(value.shape[1:], dtype=int))
+        size = math.prod(value.shape[1:])
         layout[name] = (slice(at, at + size), tuple(value.shape[1:]))
         at += size
     out = np.concatenate([v.reshape(len(v), -1) for v in parts.values()], axis=1,

@@ -53,6 +53,8 @@ class Stats:
 
     @staticmethod
     def join(parts: Sequence['Stats']) -> 'Stats':
+        if len(parts) == 1:          # no copy of the one
+            return parts[0]
         rows = min(p.values.shape[0] for p in parts)
         return Stats(tuple(k for p in parts for k in p.keys),
                      np.concatenate([p.values[:rows] for p in parts], axis=1))

@@ -58,6 +58,7 @@ class Memory:
     replays: Recent[tuple[Any, ...], Repaired] = field(default_factory=lambda: Recent(REPLAYS))
     layouts: dict[tuple[int, int], stationary.Layout] = field(default_factory=dict)
     objectives: dict[tuple[Any, ...], float] = field(default_factory=dict)
+    comparisons: dict[tuple[Any, ...], Comparison] = field(default_factory=dict)
     own: dict[tuple[Any, ...], tuple[Array, ...]] = field(default_factory=dict)
     plans: dict[tuple[int, int], tuple[Any, ...]] = field(default_factory=dict)
     nulls: dict[tuple[Any, ...], Array] = field(default_factory=dict)
@@ -232,8 +233,13 @@ class Target:
     # -- comparisons ----------------------------------------------------------------------
 
     def compare(self, effects: Sequence[Effect] = (), replicates: int | None = None) -> Comparison:
-        """Real against simulated with ``effects``; rare counts by the count test."""
+        """Real against simulated with ``effects``; rare counts by the count test; each
+        made once (the stock simulator's is asked for by the world's parts and the scores)."""
         replicates = min(self.replicates, SIM_REPLICATES) if replicates is None else replicates
+        key = (self.seed, self.config, tuple(self.given) + tuple(effects), replicates)
+        return once(self.memory.comparisons, key, lambda: self._compare(effects, replicates))
+
+    def _compare(self, effects: Sequence[Effect], replicates: int) -> Comparison:
         sim, factor = self._simulated(effects, replicates, None, self.copies)
         c = compare(self.real, sim, factor)
         if not any(FAMILIES[k.family].counted for k in c.keys):
