@@ -1,6 +1,6 @@
 """Real recordings held against the simulator (``gap.target``): what a target remembers (its
-replays, repaired once, and its objectives) is what it would compute afresh, and is
-read-only."""
+replays, repaired once, its objectives and comparisons) is what it would compute afresh,
+and is read-only."""
 import numpy as np
 import pytest
 
@@ -63,6 +63,31 @@ def test_an_objective_is_computed_once_and_equals_a_fresh_targets(monkeypatch):
     reseeded = t.with_seed(t.seed + 1)
     assert reseeded.objective([drift]) == fresh().with_seed(t.seed + 1).objective([drift])
     assert reseeded.objective([drift]) != first
+
+
+def test_a_comparison_is_made_once_and_equals_a_fresh_targets(monkeypatch):
+    rec = recorded(stationary_protocol(samples=12), [TemporalDrift((1, 2), 0.02, 8.0)])
+    t = Target([rec], CONFIG, seed=3, replicates=30)
+    drift = TemporalDrift((1, 2), 0.015, 6.0, True)
+    calls = _count_replays(monkeypatch)
+    first = t.compare([drift])
+    made = len(calls)
+    t.memory.replays.clear()             # a second ask is answered without a replay
+    assert t.compare([drift]) is first and len(calls) == made
+
+    def same(a, b) -> bool:
+        return a.keys == b.keys and all(np.array_equal(getattr(a, f), getattr(b, f),
+                                                       equal_nan=True)
+                                        for f in ('real', 'sim', 'se', 'z'))
+    fresh = Target([rec], CONFIG, seed=3, replicates=30)
+    assert same(fresh.compare([drift]), first)
+    # the replicates, the effects a copy is given and its seed are part of the key
+    fewer = t.compare([drift], replicates=10)
+    assert fewer is not first and same(fewer, fresh.compare([drift], replicates=10))
+    given = t.with_given([drift]).compare()
+    assert given is first                # the same simulator: given or added, one comparison
+    reseeded = t.with_seed(4).compare([drift])
+    assert not same(reseeded, first) and same(reseeded, fresh.with_seed(4).compare([drift]))
 
 
 def test_a_remembered_replay_is_the_repaired_replay(monkeypatch):
