@@ -20,12 +20,6 @@ MIN_OWN = 3               # channels the own part needs (the others' mean of two
 ROUNDING = 1e-10          # a spread below this share of the level: a constant sensor's rounding
 
 
-@functools.cache
-def triu(c: int, k: int = 0) -> tuple[np.ndarray, ...]:
-    """``np.triu_indices(c, k)``, made once per size (shared: never modify it)."""
-    return np.triu_indices(c, k)
-
-
 def cells(rec: Recording) -> tuple[list[tuple[str, float | None]], np.ndarray]:
     """(labels in order of first appearance, cell of each sample)."""
     heading = np.round(rec.heading_deg, 1)
@@ -99,7 +93,7 @@ class Grouping:
     def cross(self, y: Array) -> Array:
         """(groups, C (C + 1) / 2) sums of the products y_k y_m, k <= m: a matrix product per
         group where groups are few (whole strata), else the products summed."""
-        i, j = triu(y.shape[1])
+        i, j = np.triu_indices(y.shape[1])
         out = np.zeros((self.size, i.size), y.dtype)
         if len(self.segments) <= 64:
             for g, at in self.segments:
@@ -213,7 +207,7 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
     """(keys, (R, k) columns) from the resampled (R, S, D) sums."""
     n = b.part(s, 'n')[..., 0]
     s1, c = b.part(s, 's1'), len(b.channels)
-    i, j = triu(c)
+    i, j = np.triu_indices(c)
     s2 = np.zeros(s.shape[:2] + (c, c))
     s2[..., i, j] = s2[..., j, i] = b.part(s, 's2')
     centred = s2 - s1[..., :, None] * s1[..., None, :] / n[..., None, None]
@@ -222,7 +216,7 @@ def stats(b: bootstrap.Blocks, s: Array) -> tuple[list[Key], list[Array]]:
     conditions = tuple(dict.fromkeys(cond for cond, _ in b.strata))
     r = s.shape[0]
     cols = [np.stack([level, cell_sd], axis=3).reshape(r, -1)]
-    pairs = triu(c, 1)
+    pairs = np.triu_indices(c, 1)
     for cond in conditions:
         m = [i for i, lab in enumerate(b.strata) if lab[0] == cond]
         dof = (n[:, m] - 1).sum(axis=1)
