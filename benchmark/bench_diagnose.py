@@ -60,9 +60,17 @@ def timed(rec, seed: int = 0, which: str = 'v1') -> tuple[float, diagnose.Diagno
     return time.perf_counter() - t0, result
 
 
-# where a diagnosis spends its time: (label, function of ``gap/target.py``)
-WHERE = (('the fitters\' objectives', '_objective'), ('comparisons', '_compare'),
-         ('  replays, dropouts repaired', '_replay'), ('  statistics', '_stats'))
+# where a diagnosis spends its time: (label, module of the package, its functions)
+WHERE = (('the fitters\' objectives', 'gap/target.py', ('_objective',)),
+         ('comparisons', 'gap/target.py', ('_compare',)),
+         ('  replays, dropouts repaired', 'gap/target.py', ('_replay',)),
+         ('    simulating the replay', 'effects/simulate.py', ('stationary',)),
+         ('    the dropout repair', 'gap/dropouts.py', ('repair',)),
+         ('  statistics', 'gap/target.py', ('_stats',)),
+         ('    block sums', 'gap/stationary.py', ('sums',)),
+         ('    converter sums', 'gap/converter.py', ('stationary_sums',)),
+         ('    bootstrap table, resampled', 'gap/bootstrap.py', ('pack', 'resampled')),
+         ('    statistics from the sums', 'gap/stationary.py', ('stats',)))
 
 
 def profile(rec, which: str) -> None:
@@ -71,9 +79,9 @@ def profile(rec, which: str) -> None:
     profiler.runcall(timed, rec, 0, which)
     table = pstats.Stats(profiler).stats
     print('  under cProfile (slower):')
-    for label, name in WHERE:
+    for label, module, names in WHERE:
         rows = [v for (path, _, func), v in table.items()
-                if path.endswith(os.path.join('gap', 'target.py')) and func == name]
+                if path.endswith(os.path.join(*module.split('/'))) and func in names]
         print(f'    {label:30s} {sum(v[1] for v in rows):5d} calls '
               f'{sum(v[3] for v in rows):6.2f} s')
     own = sorted(table.items(), key=lambda kv: -kv[1][2])[:8]
