@@ -13,7 +13,8 @@ wall and CPU time of ``gap.diagnose.diagnose`` are printed, and the compound set
 found.  On a machine shared with other jobs the wall figures are pessimistic; the
 CPU time of this single-threaded process is the closer measure of one core's work.
 ``--profile``: one more run of each under cProfile (slower), with where its time goes:
-the fitters' objectives, the comparisons, and within them the replays and statistics.
+the fitters' objectives, the comparisons, and within them the replays and statistics,
+each by stage (simulation, dropout repair; block sums, bootstrap table, statistics).
 """
 from __future__ import annotations
 
