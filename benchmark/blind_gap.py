@@ -1,6 +1,7 @@
 """Blind benchmark of the sim-to-real gap diagnosis (prints figures; not a test).
 
-    python benchmark/blind_gap.py [--cases 40] [--seed 0] [--transfer N] [--out FILE.json]
+    python benchmark/blind_gap.py [--cases 40] [--seed 0] [--samples 60] [--transfer N]
+                                   [--out FILE.json]
     python benchmark/blind_gap.py --record EFFECTS_YAML --to DIR [--seed 0]
 
 Each case draws one effect of the vocabulary (or none) at a random location and
@@ -166,12 +167,14 @@ TRANSFER_ANSWERS = ('actuator_turn_error', 'sensor_latency')   # effects that ac
 TRANSFER_EA = evolution.EAConfig(population=15, generations=20)
 
 
-def run_case(k: int, rng, genome, options, transfer_trials: int) -> dict:
+def run_case(k: int, rng, genome, options, transfer_trials: int,
+             samples: int = SAMPLES) -> dict:
     name, config, truth = draw_case(rng)
     seed = int(rng.integers(0, 2 ** 31))
     world = robot(config, seed)
     t0 = time.perf_counter()
-    recordings = [record_stationary(world), record_closed_loop(world, genome, seed=seed)]
+    recordings = [record_stationary(world, samples=samples),
+                  record_closed_loop(world, genome, seed=seed)]
     record_s = time.perf_counter() - t0
     if truth['location'] is not None:
         truth['effective'] = effective_location(config, seed, recordings[0])
@@ -261,6 +264,9 @@ def main(argv=None) -> int:
                    help='instead: record the protocol from the emulator of this effects '
                         'file into --to (stationary and closed_loop CSV + YAML)')
     p.add_argument('--to', type=Path, default=Path('results/recordings'))
+    p.add_argument('--samples', type=int, default=SAMPLES,
+                   help='stationary readings per heading (693: an hour at 10 Hz, as '
+                        'bench_diagnose.py\'s long recording)')
     args = p.parse_args(argv)
     if args.record:
         return record_only(args.record, args.to, args.seed)
@@ -273,7 +279,7 @@ def main(argv=None) -> int:
     for k in range(args.cases):
         transfer_trials = args.transfer_trials if sum(bool(r['transfer']) for r in rows) \
             < args.transfer else 0
-        row = run_case(k, rng, genome, options, transfer_trials)
+        row = run_case(k, rng, genome, options, transfer_trials, args.samples)
         rows.append(row)
         mark = 'ok ' if row['correct'] else 'XX '
         where = '' if row['located'] or not row['correct'] else (
