@@ -122,11 +122,13 @@ def draw_case(rng, name: str | None = None) -> tuple[str, emu.EffectsConfig, dic
     return name, base.only(name, **{name: settings}), truth
 
 
-def effective_location(config: emu.EffectsConfig, seed: int, recorded: Recording) -> list:
+def effective_location(config: emu.EffectsConfig, seed: int, recorded: Recording,
+                       samples: int = SAMPLES) -> list:
     """The sensors whose stationary readings the effect changed: the same robot, seed and
     protocol without the effect (the emulator's draws do not depend on which effects are
     on) differs from the recording exactly where the effect acted."""
-    plain = record_stationary(robot(emu.EffectsConfig.none(SENSOR_NOISE), seed))
+    plain = record_stationary(robot(emu.EffectsConfig.none(SENSOR_NOISE), seed),
+                              samples=samples)
     return [int(s) for s in np.flatnonzero((plain.readings != recorded.readings).any(axis=0))]
 
 
@@ -177,7 +179,7 @@ def run_case(k: int, rng, genome, options, transfer_trials: int,
                   record_closed_loop(world, genome, seed=seed)]
     record_s = time.perf_counter() - t0
     if truth['location'] is not None:
-        truth['effective'] = effective_location(config, seed, recordings[0])
+        truth['effective'] = effective_location(config, seed, recordings[0], samples)
     t0 = time.perf_counter()
     result = diagnose.diagnose(recordings, dataclasses.replace(options, seed=k))
     answer = next((e for e in result.effects if e['name'] == result.top_effect), None)
