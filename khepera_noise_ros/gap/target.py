@@ -80,8 +80,8 @@ class Target:
         self.config, self.seed, self.base, self.replicates = config, seed, base, replicates
         self.given: tuple[Effect, ...] = ()
         self.samples = sum(len(r) for r in self.recordings)
-        # enough simulated samples, not more: fits cost less
-        self.copies = int(np.clip(round(SIM_SAMPLES / max(self.samples, 1)), 2, SIM_COPIES))
+        # enough simulated samples, not more: fits cost less (a long recording: one copy)
+        self.copies = int(np.clip(round(SIM_SAMPLES / max(self.samples, 1)), 1, SIM_COPIES))
         self.kinds = [r.kind for r in self.real_data]
         self.block_lengths = list(block_lengths) or [
             0 if r.kind == 'closed_loop' else stationary.block_length(
@@ -183,7 +183,7 @@ class Target:
     def _inflation(self, i: int, sim: Recording, pooled: Stats, copies: int) -> Array:
         """Per statistic: 1, except a stationary cell level: the variance of the level between
         copies over the real bootstrap variance, pooled per condition, at least 1 (a slow
-        wander moves whole runs, which blocks within a run cannot show)."""
+        wander moves whole runs, which blocks within a run cannot show); one copy: 1."""
         factor = np.ones(len(pooled.keys))
         if self.kinds[i] != 'stationary' or copies < 2:
             return factor
