@@ -90,6 +90,21 @@ def test_a_comparison_is_made_once_and_equals_a_fresh_targets(monkeypatch):
     assert not same(reseeded, first) and same(reseeded, fresh.with_seed(4).compare([drift]))
 
 
+@pytest.mark.parametrize('samples, copies', [(12, 3), (340, 1)])
+def test_a_comparison_simulates_enough_samples_and_no_more(monkeypatch, samples, copies):
+    """A short recording is compared on three simulated copies of its protocol; one of over
+    13,333 samples on one copy, as its objectives are."""
+    rec = recorded(stationary_protocol(samples=samples))
+    t = Target([rec], CONFIG, seed=1, replicates=10)
+    asked = []
+    plain = Replayer.replay
+    monkeypatch.setattr(Replayer, 'replay', lambda self, effects=(), seed=0, copies=1:
+                        asked.append(copies) or plain(self, effects, seed, copies))
+    t.compare()
+    t.objective()
+    assert asked and set(asked) == {copies}, (len(rec), asked)
+
+
 def test_a_remembered_replay_is_the_repaired_replay(monkeypatch):
     rec = recorded(stationary_protocol(samples=12))
     effect = SaturationQuantization((0, 1), dropout=0.05, dropout_value=0.0)
