@@ -10,7 +10,9 @@ records them:
   long      about 36,000 samples x 8 sensors (one hour at 10 Hz)
 Each is diagnosed in this process on one core (OMP/BLAS threads set to 1); the
 wall and CPU time of ``gap.diagnose.diagnose`` are printed, and the compound set
-found.  On a machine shared with other jobs the wall figures are pessimistic; the
+found.  ``--repeat N`` diagnoses with simulator seeds 0 .. N - 1 (another seed is
+another diagnosis: seed 0's does more work than seed 1's) and prints the best and each
+seed's.  On a machine shared with other jobs the wall figures are pessimistic; the
 CPU time of this single-threaded process is the closer measure of one core's work.
 ``--profile``: one more run of each under cProfile (slower), with where its time goes:
 the fitters' objectives, the comparisons, and within them the replays and statistics,
@@ -118,6 +120,9 @@ def main(argv=None) -> int:
               f'top {result.top_effect}; '
               f'compound {chosen} shrink '
               f'{"n/a" if shrink is None else f"{shrink:.2f}"}', flush=True)
+        if len(cpu) > 1:     # each repeat is another simulator seed: another diagnosis
+            seeds = ', '.join(f'{k}: {c:.2f} s' for k, c in enumerate(cpu))
+            print(f'  CPU by simulator seed: {seeds}')
         if args.profile:
             profile(rec, args.robot)
     return 0
