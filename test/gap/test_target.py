@@ -13,10 +13,11 @@ from khepera_noise_ros.testing.protocols import CONFIG, recorded, stationary_pro
 
 
 def _count_replays(monkeypatch) -> list:
+    """The copies each replay from now on is asked for, one entry a replay."""
     calls = []
     plain = Replayer.replay
-    monkeypatch.setattr(Replayer, 'replay',
-                        lambda self, *a, **kw: calls.append(1) or plain(self, *a, **kw))
+    monkeypatch.setattr(Replayer, 'replay', lambda self, effects=(), seed=0, copies=1:
+                        calls.append(copies) or plain(self, effects, seed, copies))
     return calls
 
 
@@ -96,10 +97,7 @@ def test_a_comparison_simulates_enough_samples_and_no_more(monkeypatch, samples,
     13,333 samples on one copy, as its objectives are."""
     rec = recorded(stationary_protocol(samples=samples))
     t = Target([rec], CONFIG, seed=1, replicates=10)
-    asked = []
-    plain = Replayer.replay
-    monkeypatch.setattr(Replayer, 'replay', lambda self, effects=(), seed=0, copies=1:
-                        asked.append(copies) or plain(self, effects, seed, copies))
+    asked = _count_replays(monkeypatch)
     t.compare()
     t.objective()
     assert asked and set(asked) == {copies}, (len(rec), asked)
