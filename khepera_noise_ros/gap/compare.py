@@ -138,6 +138,16 @@ def paired_p(before: Array, after: Array, d_prev: float, d_new: float) -> float:
     return float((np.sum(diff <= 0) + 1) / (diff.size + 1))
 
 
+def replicate_discrepancies(reps: Array, c: Comparison) -> Array:
+    """Each real bootstrap replicate's discrepancy against the simulated side of ``c``
+    (``reps``: (R, K), a column per key of ``c``)."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        z = (reps - c.sim[None]) / c.se[None]
+    z = np.nan_to_num(z, nan=0.0, posinf=1e3, neginf=-1e3)
+    out: Array = (np.clip(np.abs(z) - MARGIN, 0.0, None) ** 2).sum(axis=1)
+    return out
+
+
 def floors(keys: Sequence[Key]) -> Array:
     """The squared least standard error of each statistic (its family's floor)."""
     return np.array([FAMILIES[k.family].floor for k in keys]) ** 2

@@ -17,7 +17,8 @@ from ..effects.simulate import SimCache
 from ..memo import Recent, once
 from ..recording import Recording
 from . import bootstrap, closedloop, converter, dropouts, evidence, stationary, turns
-from .compare import MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount
+from .compare import (MARGIN, Z_CAP, Comparison, Stats, compare, discrepancy, floors, recount,
+                      replicate_discrepancies)
 from .families import FAMILIES, having, of_part
 from ..simconfig import SimConfig
 from .protocol import condition_world, episodes, kind, runs
@@ -276,11 +277,7 @@ class Target:
     def replicate_discrepancies(self, c: Comparison) -> Array:
         """Each real bootstrap replicate's discrepancy against the simulated side of ``c``."""
         rows = [self.real.index[k] for k in c.keys]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            z = (self.real.values[1:, rows] - c.sim[None]) / c.se[None]
-        z = np.nan_to_num(z, nan=0.0, posinf=1e3, neginf=-1e3)
-        out: Array = (np.clip(np.abs(z) - MARGIN, 0.0, None) ** 2).sum(axis=1)
-        return out
+        return replicate_discrepancies(self.real.values[1:, rows], c)
 
     def evidence(self, c: Comparison | None) -> 'TargetEvidence':
         """What a fitter sees (``c``: the comparison with the simulator as given)."""
