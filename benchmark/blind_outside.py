@@ -1,7 +1,8 @@
 """Outside blind benchmark of the gap diagnosis (prints figures; not a test).
 
     python benchmark/blind_outside.py [--cases 28] [--seed 0] [--quick] [--jobs 1]
-        [--khepera-noise 'PATH/TO/khepera-noise'] [--work DIR] [--out FILE.json]
+        [--khepera-noise 'PATH/TO/khepera-noise'] [--diagnosis-shift N] [--work DIR]
+        [--out FILE.json]
 
 A second generator, written from scratch: it shares no code with the project's
 effect models or the first blind benchmark, and draws hidden effects in shapes
@@ -64,8 +65,9 @@ def run_case(case, args, command, work: Path) -> dict:
     folder = work / f'case_{case["id"]:03d}'
     folder.mkdir(parents=True, exist_ok=True)
     path = make_recording(case, args.quick, folder)
-    diag, error, took = diagnose(command, path, folder / 'diagnosis', case['seed'],
-                                 args.replicates, args.timeout)
+    diag, error, took = diagnose(command, path, folder / 'diagnosis',
+                                 case['seed'] + args.diagnosis_shift, args.replicates,
+                                 args.timeout)
     result = {'id': case['id'], 'kind': case['kind'], 'protocol': case['protocol'],
               'effects': [e.describe() for e in case['effects']], 'error': error,
               'seconds': round(took, 2)}
@@ -153,6 +155,9 @@ def main(argv=None) -> int:
     p.add_argument('--khepera-noise', default=None, metavar='COMMAND',
                    help='the khepera-noise command to test (default: the one beside this '
                         'Python)')
+    p.add_argument('--diagnosis-shift', type=int, default=0, metavar='N',
+                   help="diagnose each case with its seed + N: other simulator draws, the "
+                        "same recordings (a neutral change, to see what the seed is worth)")
     p.add_argument('--jobs', type=int, default=1)
     p.add_argument('--timeout', type=float, default=600.0, help='seconds per diagnosis')
     p.add_argument('--work', type=Path, default=None, help='keep recordings here')
@@ -167,7 +172,8 @@ def main(argv=None) -> int:
     singles = -(-args.cases * 3 // 5)
     cases = draw_cases(args.seed, singles, args.cases - singles, args.controls)
     work = args.work or Path(tempfile.mkdtemp(prefix='blind_outside_'))
-    print(f'{len(cases)} cases (seed {args.seed}), diagnosis: {" ".join(command)}, '
+    shift = f', diagnosis seeds + {args.diagnosis_shift}' if args.diagnosis_shift else ''
+    print(f'{len(cases)} cases (seed {args.seed}{shift}), diagnosis: {" ".join(command)}, '
           f'work: {work}', flush=True)
     results, start = [], time.perf_counter()
 
@@ -189,7 +195,8 @@ def main(argv=None) -> int:
     summary['wall_seconds'] = round(time.perf_counter() - start, 1)
     print_table(summary)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({'seed': args.seed, 'quick': args.quick,
+    args.out.write_text(json.dumps({'seed': args.seed, 'diagnosis_shift': args.diagnosis_shift,
+                                    'quick': args.quick,
                                     'command': command, 'summary': summary,
                                     'cases': results}, indent=1, default=str))
     print(f'\nwrote {args.out} ({summary["wall_seconds"]} s)')
