@@ -9,9 +9,9 @@ fresh seeds together, not figure by figure (a seed's figures hold its simulator 
 
 Per pair and pooled, over the compound cases' true effects: how many only BEFORE finds
 and how many only AFTER finds (the exact two-sided sign test on these), the false effects
-only one of them names, and the recall of each with the difference's 95% interval (cases
-as clusters: a case's effects share its recording).  Single cases: how many top-1 answers
-only one of them gets right.
+only one of them names (control cases too), and the recall difference with its 95%
+interval (cases as clusters: a case's effects share its recording).  Single cases: how
+many top-1 answers only one of them gets right.
 """
 from __future__ import annotations
 
