@@ -34,7 +34,8 @@ class Paired:
     false_after: int = 0
     top1_before: int = 0        # single cases right only before
     top1_after: int = 0
-    clusters: list[tuple[int, int]] = field(default_factory=list)   # (found after - before, truth)
+    clusters: list[tuple[int, int]] = field(default_factory=list)   # a compound case's (found
+    # after - found before, true effects)
 
     def add(self, other: 'Paired') -> None:
         for name in ('truth', 'only_before', 'only_after', 'false_before', 'false_after',
@@ -76,7 +77,8 @@ def compare(before: dict[Any, dict[str, Any]], after: dict[Any, dict[str, Any]])
         out.only_after += len((truth & pa) - pb)
         out.false_before += len((pb - truth) - pa)
         out.false_after += len((pa - truth) - pb)       # controls too: their truth is empty
-        out.clusters.append((len(truth & pa) - len(truth & pb), len(truth)))
+        if truth:
+            out.clusters.append((len(truth & pa) - len(truth & pb), len(truth)))
     return out
 
 
@@ -103,8 +105,7 @@ def difference(clusters: list[tuple[int, int]]) -> tuple[float, float]:
 def line(label: str, p: Paired) -> str:
     d, half = difference(p.clusters)
     n = p.only_before + p.only_after
-    compound = sum(1 for _, t in p.clusters if t)
-    return (f'{label}: {p.truth} true effects in {compound} compound cases; found only '
+    return (f'{label}: {p.truth} true effects in {len(p.clusters)} compound cases; found only '
             f'before {p.only_before}, only after {p.only_after} (sign test p = '
             f'{sign_test(p.only_before, n):.3f}); recall after - before {100 * d:+.1f} points '
             f'(95% interval {100 * (d - half):+.1f} to {100 * (d + half):+.1f}); false effects '
