@@ -13,6 +13,8 @@ from ..files import StrPath, atomic_open, atomic_write_text
 from .model import (COLUMNS, KHEPERA_CHANNELS, Recording, RecordingError, check_manifest,
                     check_sequence, columns, dump_manifest, finish_manifest, first_bad_row)
 
+EXACT = 2 ** 53                  # the largest integer a double holds exactly: episode and step
+
 
 def paths(path: StrPath) -> tuple[Path, Path]:
     """(NAME.csv, NAME.yaml) for NAME, NAME.csv or NAME.yaml."""
@@ -128,8 +130,8 @@ def _number(name: str, text: str, integer: bool = False) -> float:
         value = float(text)
     except ValueError:
         raise ValueError(f'{name} is not a number: {text!r}') from None
-    if integer and not value.is_integer():
-        raise ValueError(f'{name} must be an integer, got {text!r}')
+    if integer and not (value.is_integer() and abs(value) <= EXACT):
+        raise ValueError(f'{name} must be an integer of at most {EXACT:,} in size, got {text!r}')
     return value
 
 

@@ -160,7 +160,10 @@ def edit_line(path, number, new):
     (6, lambda s: s.replace(',bright,', ',bright,x7'), "line 6: s0 is not a number: 'x7"),
     (7, lambda s: s.replace(',bright,', ',bright,-4'), 'line 7: s0 must be a reading in '
                                                        r'\[0, 525\], got -4'),
-    (8, lambda s: '0.5' + s[1:], "line 8: episode must be an integer, got '0.5'"),
+    (8, lambda s: '0.5' + s[1:], "line 8: episode must be an integer of at most "
+                                 r"9,007,199,254,740,992 in size, got '0.5'"),
+    (10, lambda s: '0,' + '9' * 30 + s[s.index(',', 2):],
+     "line 10: step must be an integer of at most 9,007,199,254,740,992 in size, got '9999"),
     (9, lambda s: s[:-1] + '1,', 'line 9: direction and power must both be given or both'),
     (1, lambda s: s.replace('s7', 'light7'), 'line 1: header must be episode,step'),
 ])
