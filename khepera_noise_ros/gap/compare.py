@@ -13,7 +13,7 @@ from scipy import stats as sps
 
 from ..effects.base import Array, Key, Row
 from ..effects.fitting import ALPHA, holm
-from .families import FAMILIES, PARTS, having
+from .families import FAMILIES, having
 
 MARGIN = 2.0
 Z_CAP = 1e3
@@ -106,10 +106,6 @@ class Comparison:
 
     def part(self, name: str) -> 'Comparison':
         return self.select(self.parts == name)
-
-    def split(self) -> dict[str, 'Comparison']:
-        """Each part's statistics (parts with none left out)."""
-        return {p: self.part(p) for p in PARTS if (self.parts == p).any()}
 
     def of(self, family: str) -> 'Comparison':
         return self.select([k.family == family for k in self.keys])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -116,8 +116,7 @@ class Diagnosis:
 Scored = tuple[dict[str, Any], Comparison | None, Effect | None, Array | None]
 
 
-def diagnose(recordings: Sequence[Recording], options: Options = Options(),
-             log: Callable[[str], None] | None = None) -> Diagnosis:
+def diagnose(recordings: Sequence[Recording], options: Options = Options()) -> Diagnosis:
     """The gap between ``recordings`` (one robot: stationary, closed-loop or both) and the
     simulator of ``options.config``; ValueError (one line) on bad recordings or options."""
     check(recordings)
@@ -149,7 +148,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
                    cache=full.memory.cache)
             for k, part in ((1, fit_part), (2, test_part)))
     parts: dict[str, str] = {}
-    world = _world(a, b, b.compare(), o, log, parts) if significant else None
+    world = _world(a, b, b.compare(), o, parts) if significant else None
     if world is None and parts:     # never silent about a part its protocol would identify
         notes.append('the world model is the simulator\'s own: ' + '; '.join(
             f'{name}: {note}' for name, note in parts.items()))
@@ -192,7 +191,7 @@ def diagnose(recordings: Sequence[Recording], options: Options = Options(),
             result.held_out_after = best_cmp
             if o.compound:
                 a, b = _compound(result, a, b, (best_effect, best_entry['note'], best_cmp,
-                                                best_reps), before_reps, o, log)
+                                                best_reps), before_reps, o)
             else:
                 result.combined = _combined(b, scored, d_before, o)
         else:
@@ -227,7 +226,7 @@ def _noisier(c: Comparison, alpha: float) -> str:
 
 
 def _world(a: Target, b: Target, before: Comparison, o: Options,
-           log: Callable[[str], None] | None, notes: dict[str, str]) -> World | None:
+           notes: dict[str, str]) -> World | None:
     """The world model's parts among ``o.effects`` fitted on ``a`` in order, each given those
     before it (the light shapes what a sensor follows, and both what a turn shows), then
     dropped while that lowers the held-out discrepancy on ``b``, and left to its plain case
@@ -267,20 +266,17 @@ def _world(a: Target, b: Target, before: Comparison, o: Options,
                  before.discrepancy, current.discrepancy)
     if p >= STEP_ALPHA or current.discrepancy >= before.discrepancy:
         return None
-    if log:
-        log(f'world: {", ".join(e.name for e in fitted)} -> '
-            f'{reduction(before.discrepancy, current.discrepancy):.2f}')
     return World(fitted, before.discrepancy, current.discrepancy, p, notes)
 
 
 def _compound(result: Diagnosis, a: Target, b: Target,
-              best: tuple[Effect, str, Comparison, Array], before_reps: Array, o: Options,
-              log: Callable[[str], None] | None) -> tuple[Target, Target]:
+              best: tuple[Effect, str, Comparison, Array], before_reps: Array,
+              o: Options) -> tuple[Target, Target]:
     """The compound set chosen from the best single effect (and the rounding asked again)."""
     before = result.held_out_before
     assert before is not None
     c = result.compound = Selection(a, b, before, before.discrepancy).run(
-        best, [n for n in o.effects if n not in WORLD_MODEL], before_reps, log)
+        best, [n for n in o.effects if n not in WORLD_MODEL], before_reps)
     if o.rounding and len(c.effects) > 1 and result.rounding and \
             result.rounding['rounding'] == result.rounding['given']:
         a, b = _late_rounding(result, a, b, o)

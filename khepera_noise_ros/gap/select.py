@@ -120,7 +120,7 @@ class Selection:
         self.vetoed: dict[str, str] = {}     # effect -> the closed-loop part it predicts worse
 
     def run(self, best: tuple[Effect, str, Comparison, Array], names: Sequence[str],
-            before_reps: Array, log: Callable[[str], None] | None = None) -> Compound:
+            before_reps: Array) -> Compound:
         effect0, note0, cmp0, reps0 = best
         d_prev = cmp0.discrepancy
         steps = [entry(effect0, note0, self.d_before, d_prev, self.d_before,
@@ -167,8 +167,6 @@ class Selection:
             d_last, d_prev = d_prev, step.after.discrepancy
             steps.append(entry(chosen[-1], step.cand.note, self.d_before, d_prev, d_last, step.p,
                                step.rule))
-            if log:
-                log(f'compound: + {step.cand.name} -> {reduction(self.d_before, d_prev):.2f}')
         for s, e in zip(steps, chosen):            # the parameters reported are the backfitted
             s['parameters'], s['sensors'] = e.parameters(), list(e.sensors)
         return Compound(chosen, steps, self.d_before, current.discrepancy, current, rejected)
