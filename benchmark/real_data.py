@@ -1,0 +1,165 @@
+"""The diagnosis on the two public logs of docs/real-data.md (prints figures; not a test).
+
+    python benchmark/real_data.py [--room Occupancy_Estimation.csv] [--lab data.txt]
+                                  [--out FIGURES.json] [--before FIGURES.json]
+
+The files are not in the repository (docs/real-data.md says where they are published and
+which copies the page's figures come from; the SHA-256 of each input is printed, so a
+figure is tied to its file).  Each is converted as the page does and diagnosed against
+its references, one core, in this process:
+
+  room         the room-occupancy file, eight channels; default, noise-free and 1 %
+               independent references
+  lab79        the Intel Lab log, motes 7 and 9; default, 1 % and 0.7 % independent
+  lab19        motes 1-4 and 6-9, runs of 2 samples or more; the same references
+
+Per run: the top effect, every effect's held-out reduction, the chosen compound with its
+cumulative reductions, and the CPU time.  ``--out`` keeps these figures; ``--before``
+prints, run by run, where a earlier ``--out`` file (another tree's) differs, and whether
+each compound's held-out reduction is at least as large as before.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import io
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(var, '1')
+
+from khepera_noise_ros import cli  # noqa: E402
+
+REFERENCES = {      # name -> the simulator's parameters (None: its defaults)
+    'default': None,
+    'none': {'noise_model': 'none'},
+    'ind1': {'noise_model': 'independent', 'dependent_level': 0.0, 'independent_level': 0.01},
+    'ind07': {'noise_model': 'independent', 'dependent_level': 0.0, 'independent_level': 0.007},
+}
+# recording -> (format, the file's option, the converter's arguments, references)
+RUNS = {
+    'room': ('room-occupancy', 'room', [], ('default', 'none', 'ind1')),
+    'lab79': ('intel-lab', 'lab', ['--motes', '7', '9', '--quantity', 'light'],
+              ('default', 'ind1', 'ind07')),
+    'lab19': ('intel-lab', 'lab', ['--motes', '1', '2', '3', '4', '6', '7', '8', '9',
+                                   '--quantity', 'light', '--min-length', '2'],
+              ('default', 'ind1', 'ind07')),
+}
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, 'rb') as f:
+        for block in iter(lambda: f.read(1 << 20), b''):
+            h.update(block)
+    return h.hexdigest()
+
+
+def quiet(argv: list[str]) -> None:
+    """``khepera-noise ARGV`` in this process; its output is shown only if it fails."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+        status = cli.main(argv)
+    if status:
+        sys.exit(f'khepera-noise {" ".join(argv)} failed ({status}):\n{out.getvalue()}')
+
+
+def params_file(work: Path, reference: str) -> list[str]:
+    values = REFERENCES[reference]
+    if values is None:
+        return []
+    path = work / f'{reference}.yaml'
+    lines = ['/**/simulator:', '  ros__parameters:'] + [
+        f'    {k}: {v}' for k, v in values.items()]
+    path.write_text('\n'.join(lines) + '\n')
+    return ['--params', str(path)]
+
+
+def figures(diagnosis: dict[str, Any], cpu: float) -> dict[str, Any]:
+    compound = diagnosis.get('compound') or {}
+    return {'top_effect': diagnosis['top_effect'],
+            'effects': {e['name']: round(e['heldout_reduction'], 4)
+                        for e in diagnosis['effects']},
+            'compound': [[c['name'], round(c['cumulative_reduction'], 4)]
+                         for c in compound.get('chosen', [])],
+            'compound_reduction': round(compound['heldout_reduction'], 4) if compound else None,
+            'cpu_s': round(cpu, 2)}
+
+
+def show(name: str, f: dict[str, Any]) -> None:
+    chosen = ', '.join(f'{n} ({r:.3f})' for n, r in f['compound']) or 'none'
+    named = '; '.join(f'{n} {r:.3f}' for n, r in f['effects'].items() if r != 0) or 'none'
+    print(f'{name:14s} top {f["top_effect"]}; compound {chosen}; {f["cpu_s"]:.1f} s CPU')
+    print(f'{"":14s} held-out reductions: {named}')
+
+
+def compare(before: dict[str, Any], after: dict[str, Any]) -> None:
+    print('\nagainst --before:')
+    for name, f in after['runs'].items():
+        b = before['runs'].get(name)
+        if b is None:
+            print(f'  {name}: not in --before')
+            continue
+        keys = ('top_effect', 'effects', 'compound')
+        if all(b[k] == f[k] for k in keys):
+            print(f'  {name}: the same')
+            continue
+        was, now = b['compound_reduction'] or 0.0, f['compound_reduction'] or 0.0
+        verdict = 'at least as good' if now >= was else 'WORSE'
+        print(f'  {name}: differs; compound {was:.4f} -> {now:.4f} ({verdict})')
+        for k in keys:
+            if b[k] != f[k]:
+                print(f'      {k}: {b[k]} -> {f[k]}')
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--room', type=Path, help='Occupancy_Estimation.csv (UCI)')
+    p.add_argument('--lab', type=Path, help="data.txt (the Intel Lab log, or the page's "
+                   'five-day extract)')
+    p.add_argument('--out', type=Path, help='write the figures here (JSON)')
+    p.add_argument('--before', type=Path, help='an earlier --out to compare with')
+    args = p.parse_args()
+    files = {'room': args.room, 'lab': args.lab}
+    if not any(files.values()):
+        p.error('give --room FILE, --lab FILE or both (docs/real-data.md: where to get them)')
+    for option, path in files.items():
+        if path is not None and not path.is_file():
+            p.error(f'--{option} {path}: no such file')
+    result: dict[str, Any] = {'inputs': {k: {'file': str(v), 'sha256': sha256(v)}
+                                         for k, v in files.items() if v}, 'runs': {}}
+    for k, v in result['inputs'].items():
+        print(f'{k}: {v["file"]} sha256 {v["sha256"]}')
+    with tempfile.TemporaryDirectory(prefix='real_data_') as tmp:
+        work = Path(tmp)
+        for rec, (fmt, option, convert_args, references) in RUNS.items():
+            source = files[option]
+            if source is None:
+                continue
+            quiet(['convert', fmt, str(source), str(work / rec)] + convert_args)
+            for reference in references:
+                out = work / f'{rec}_{reference}'
+                cpu = time.process_time()
+                quiet(['diagnose', str(work / rec), '--base', 'observed', '--no-figures',
+                       '--out', str(out)] + params_file(work, reference))
+                cpu = time.process_time() - cpu
+                name = f'{rec}/{reference}'
+                result['runs'][name] = figures(
+                    json.loads((out / 'diagnosis.json').read_text()), cpu)
+                show(name, result['runs'][name])
+    if args.out:
+        args.out.write_text(json.dumps(result, indent=1) + '\n')
+        print(f'wrote {args.out}')
+    if args.before:
+        compare(json.loads(args.before.read_text()), result)
+
+
+if __name__ == '__main__':
+    main()
