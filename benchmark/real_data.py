@@ -1,7 +1,7 @@
 """The diagnosis on the two public logs of docs/real-data.md (prints figures; not a test).
 
     python benchmark/real_data.py [--room Occupancy_Estimation.csv] [--lab data.txt]
-                                  [--out FIGURES.json] [--before FIGURES.json]
+                                  [--seeds N] [--out FIGURES.json] [--before FIGURES.json]
 
 The files are not in the repository (docs/real-data.md says where they are published and
 which copies the page's figures come from; the SHA-256 of each input is printed, so a
@@ -21,6 +21,7 @@ each compound's held-out reduction is at least as large as before.
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import hashlib
 import io
@@ -36,6 +37,9 @@ for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(var, '1')
 
 from khepera_noise_ros import cli  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from paired_runs import sign_test  # noqa: E402
 
 REFERENCES = {      # name -> the simulator's parameters (None: its defaults)
     'default': None,
@@ -100,23 +104,36 @@ def show(name: str, f: dict[str, Any]) -> None:
     print(f'{"":14s} held-out reductions: {named}')
 
 
+def over_seeds(seeds: dict[str, dict[str, Any]]) -> None:
+    r = [f['compound_reduction'] or 0.0 for f in seeds.values()]
+    times = collections.Counter(n for f in seeds.values() for n, _ in f['compound'])
+    chosen = ', '.join(f'{n} {k}' for n, k in times.most_common()) or 'none'
+    print(f'{"":14s} {len(r)} seeds: compound {min(r):.3f}-{max(r):.3f} (mean '
+          f'{sum(r) / len(r):.3f}); chosen: {chosen}')
+
+
 def compare(before: dict[str, Any], after: dict[str, Any]) -> None:
     print('\nagainst --before:')
-    for name, f in after['runs'].items():
-        b = before['runs'].get(name)
-        if b is None:
+    keys = ('top_effect', 'effects', 'compound')
+    for name, seeds in after['runs'].items():
+        was = before['runs'].get(name, {})
+        shared = [s for s in seeds if s in was]
+        if not shared:
             print(f'  {name}: not in --before')
             continue
-        keys = ('top_effect', 'effects', 'compound')
-        if all(b[k] == f[k] for k in keys):
-            print(f'  {name}: the same')
+        if all(was[s][k] == seeds[s][k] for s in shared for k in keys):
+            print(f'  {name}: the same on {len(shared)} seed(s)')
             continue
-        was, now = b['compound_reduction'] or 0.0, f['compound_reduction'] or 0.0
-        verdict = 'at least as good' if now >= was else 'WORSE'
-        print(f'  {name}: differs; compound {was:.4f} -> {now:.4f} ({verdict})')
-        for k in keys:
-            if b[k] != f[k]:
-                print(f'      {k}: {b[k]} -> {f[k]}')
+        d = [(seeds[s]['compound_reduction'] or 0.0) - (was[s]['compound_reduction'] or 0.0)
+             for s in shared]
+        lower, higher = sum(x < 0 for x in d), sum(x > 0 for x in d)
+        print(f'  {name}: over {len(shared)} seed(s) the compound is lower on {lower}, equal '
+              f'on {len(d) - lower - higher}, higher on {higher} (sign test p = '
+              f'{sign_test(lower, lower + higher):.3f}); mean change {sum(d) / len(d):+.4f}')
+        if '0' in shared:
+            for k in keys:
+                if was['0'][k] != seeds['0'][k]:
+                    print(f'      seed 0 {k}: {was["0"][k]} -> {seeds["0"][k]}')
 
 
 def main() -> None:
@@ -124,12 +141,15 @@ def main() -> None:
     p.add_argument('--room', type=Path, help='Occupancy_Estimation.csv (UCI)')
     p.add_argument('--lab', type=Path, help="data.txt (the Intel Lab log, or the page's "
                    'five-day extract)')
+    p.add_argument('--seeds', type=int, default=1, help='simulator seeds 0 .. N - 1 per run')
     p.add_argument('--out', type=Path, help='write the figures here (JSON)')
     p.add_argument('--before', type=Path, help='an earlier --out to compare with')
     args = p.parse_args()
     files = {'room': args.room, 'lab': args.lab}
     if not any(files.values()):
         p.error('give --room FILE, --lab FILE or both (docs/real-data.md: where to get them)')
+    if args.seeds < 1:
+        p.error(f'--seeds {args.seeds}: give 1 or more')
     for option, path in files.items():
         if path is not None and not path.is_file():
             p.error(f'--{option} {path}: no such file')
@@ -145,15 +165,20 @@ def main() -> None:
                 continue
             quiet(['convert', fmt, str(source), str(work / rec)] + convert_args)
             for reference in references:
-                out = work / f'{rec}_{reference}'
-                cpu = time.process_time()
-                quiet(['diagnose', str(work / rec), '--base', 'observed', '--no-figures',
-                       '--out', str(out)] + params_file(work, reference))
-                cpu = time.process_time() - cpu
-                name = f'{rec}/{reference}'
-                result['runs'][name] = figures(
-                    json.loads((out / 'diagnosis.json').read_text()), cpu)
-                show(name, result['runs'][name])
+                name, seeds = f'{rec}/{reference}', {}
+                for seed in range(args.seeds):
+                    out = work / f'{rec}_{reference}_{seed}'
+                    cpu = time.process_time()
+                    quiet(['diagnose', str(work / rec), '--base', 'observed', '--no-figures',
+                           '--seed', str(seed), '--out', str(out)] +
+                          params_file(work, reference))
+                    cpu = time.process_time() - cpu
+                    seeds[str(seed)] = figures(
+                        json.loads((out / 'diagnosis.json').read_text()), cpu)
+                result['runs'][name] = seeds
+                show(name, seeds['0'])
+                if args.seeds > 1:
+                    over_seeds(seeds)
     if args.out:
         args.out.write_text(json.dumps(result, indent=1) + '\n')
         print(f'wrote {args.out}')
