@@ -89,11 +89,11 @@ def params_file(work: Path, reference: str) -> list[str]:
 def figures(diagnosis: dict[str, Any], cpu: float) -> dict[str, Any]:
     compound = diagnosis.get('compound') or {}
     return {'top_effect': diagnosis['top_effect'],
-            'effects': {e['name']: round(e['heldout_reduction'], 4)
+            'effects': {e['name']: round(e['heldout_reduction'], 6)
                         for e in diagnosis['effects']},
-            'compound': [[c['name'], round(c['cumulative_reduction'], 4)]
+            'compound': [[c['name'], round(c['cumulative_reduction'], 6)]
                          for c in compound.get('chosen', [])],
-            'compound_reduction': round(compound['heldout_reduction'], 4) if compound else None,
+            'compound_reduction': round(compound['heldout_reduction'], 6) if compound else None,
             'cpu_s': round(cpu, 2)}
 
 
@@ -105,11 +105,14 @@ def show(name: str, f: dict[str, Any]) -> None:
 
 
 def over_seeds(seeds: dict[str, dict[str, Any]]) -> None:
-    r = [f['compound_reduction'] or 0.0 for f in seeds.values()]
+    r = [f['compound_reduction'] for f in seeds.values() if f['compound_reduction'] is not None]
+    if not r:
+        print(f'{"":14s} {len(seeds)} seeds: no compound on any')
+        return
     times = collections.Counter(n for f in seeds.values() for n, _ in f['compound'])
-    chosen = ', '.join(f'{n} {k}' for n, k in times.most_common()) or 'none'
-    print(f'{"":14s} {len(r)} seeds: compound {min(r):.3f}-{max(r):.3f} (mean '
-          f'{sum(r) / len(r):.3f}); chosen: {chosen}')
+    chosen = ', '.join(f'{n} {k}' for n, k in times.most_common())
+    print(f'{"":14s} {len(seeds)} seeds: a compound on {len(r)}, {min(r):.3f}-{max(r):.3f} '
+          f'(mean {sum(r) / len(r):.3f}); chosen: {chosen}')
 
 
 def compare(before: dict[str, Any], after: dict[str, Any]) -> None:
