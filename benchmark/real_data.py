@@ -33,6 +33,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(var, '1')
 
@@ -59,11 +61,8 @@ RUNS = {
 
 
 def sha256(path: Path) -> str:
-    h = hashlib.sha256()
     with open(path, 'rb') as f:
-        for block in iter(lambda: f.read(1 << 20), b''):
-            h.update(block)
-    return h.hexdigest()
+        return hashlib.file_digest(f, 'sha256').hexdigest()
 
 
 def quiet(argv: list[str]) -> None:
@@ -76,13 +75,12 @@ def quiet(argv: list[str]) -> None:
 
 
 def params_file(work: Path, reference: str) -> list[str]:
+    """The ``--params`` option of ``reference``: its file, written in the nodes' format."""
     values = REFERENCES[reference]
     if values is None:
         return []
     path = work / f'{reference}.yaml'
-    lines = ['/**/simulator:', '  ros__parameters:'] + [
-        f'    {k}: {v}' for k, v in values.items()]
-    path.write_text('\n'.join(lines) + '\n')
+    path.write_text(yaml.safe_dump({'/**/simulator': {'ros__parameters': values}}))
     return ['--params', str(path)]
 
 
@@ -168,13 +166,12 @@ def main() -> None:
                 continue
             quiet(['convert', fmt, str(source), str(work / rec)] + convert_args)
             for reference in references:
-                name, seeds = f'{rec}/{reference}', {}
+                name, seeds, params = f'{rec}/{reference}', {}, params_file(work, reference)
                 for seed in range(args.seeds):
                     out = work / f'{rec}_{reference}_{seed}'
                     cpu = time.process_time()
                     quiet(['diagnose', str(work / rec), '--base', 'observed', '--no-figures',
-                           '--seed', str(seed), '--out', str(out)] +
-                          params_file(work, reference))
+                           '--seed', str(seed), '--out', str(out)] + params)
                     cpu = time.process_time() - cpu
                     seeds[str(seed)] = figures(
                         json.loads((out / 'diagnosis.json').read_text()), cpu)
