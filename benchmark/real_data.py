@@ -15,7 +15,7 @@ its references, one core, in this process:
 
 Per run: the top effect, every effect's held-out reduction, the chosen compound with its
 cumulative reductions, and the CPU time.  ``--out`` keeps these figures; ``--before``
-prints, run by run, where a earlier ``--out`` file (another tree's) differs, and whether
+prints, run by run, where an earlier ``--out`` file (another tree's) differs, and whether
 each compound's held-out reduction is at least as large as before.
 """
 from __future__ import annotations
